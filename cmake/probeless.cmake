@@ -1,0 +1,46 @@
+# Shared build helpers for probeless targets.
+
+add_compile_options(-Wall -Wextra -Wno-unused-parameter)
+
+if(PROBELESS_SANITIZE)
+  add_compile_options(-fsanitize=${PROBELESS_SANITIZE} -fno-omit-frame-pointer -g)
+  add_link_options(-fsanitize=${PROBELESS_SANITIZE})
+endif()
+
+# Where tests find the shared data set (skipped with a message when absent).
+if(DEFINED ENV{PROBELESS_DATA})
+  set(PROBELESS_DATA_DIR "$ENV{PROBELESS_DATA}")
+else()
+  set(PROBELESS_DATA_DIR "${CMAKE_SOURCE_DIR}/../shared/data")
+endif()
+
+# probeless_add_test(NAME <name> SOURCES <files...> LIBS <targets...> [LABELS <labels...>]
+#                    [TIMEOUT <seconds>])
+# One GoogleTest executable registered with ctest under its own name.
+function(probeless_add_test)
+  cmake_parse_arguments(T "" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  if(NOT PROBELESS_BUILD_TESTS)
+    return()
+  endif()
+  add_executable(${T_NAME} ${T_SOURCES})
+  set_target_properties(${T_NAME} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/tests)
+  target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main)
+  target_compile_definitions(${T_NAME} PRIVATE
+    PROBELESS_BIN_DIR="${CMAKE_BINARY_DIR}/bin"
+    PROBELESS_TEST_BIN_DIR="${CMAKE_BINARY_DIR}/tests"
+    PROBELESS_SOURCE_DIR="${CMAKE_SOURCE_DIR}")
+  add_test(NAME ${T_NAME} COMMAND ${T_NAME})
+  if(NOT T_TIMEOUT)
+    set(T_TIMEOUT 120)
+  endif()
+  set_tests_properties(${T_NAME} PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}"
+    ENVIRONMENT "PROBELESS_DOMAIN=ctest_${T_NAME}")
+endfunction()
+
+# probeless_add_tool(NAME <name> SOURCES <files...> LIBS <targets...>)
+# An executable that lands in build/bin/<name>.
+function(probeless_add_tool)
+  cmake_parse_arguments(T "" "NAME" "SOURCES;LIBS" ${ARGN})
+  add_executable(${T_NAME} ${T_SOURCES})
+  target_link_libraries(${T_NAME} PRIVATE ${T_LIBS})
+endfunction()
