@@ -271,6 +271,7 @@ Publisher::Publisher(std::string_view topic, const TopicType& type,
         e.slot_count = options.slot_count;
         e.history = options.history;
         e.published.store(0);
+        e.published_bytes.store(0);
         e.last_publish_mono_ns.store(0);
         e.state.store(kActive, std::memory_order_release);
         impl->index = i;
@@ -379,6 +380,7 @@ uint64_t Publisher::Publish(Loan&& loan) {
   header->refs.fetch_sub(kLoanBit, std::memory_order_acq_rel);
   for (const auto& dropped : impl.dropped) impl.topic->DecRef(dropped, /*topic_locked=*/false);
   impl.entry->published.fetch_add(1, std::memory_order_relaxed);
+  impl.entry->published_bytes.fetch_add(header->size, std::memory_order_relaxed);
   impl.entry->last_publish_mono_ns.store(header->publish_mono_ns, std::memory_order_relaxed);
   impl.topic->MaintainIfDue();
   return header->sequence;

@@ -60,6 +60,7 @@ std::vector<TopicSnapshot> ListTopics(const std::string& domain) {
       ps.slot_count = p.slot_count;
       ps.history = p.history;
       ps.published = p.published.load();
+      ps.published_bytes = p.published_bytes.load();
       ps.last_publish_mono_ns = p.last_publish_mono_ns.load();
       snap.publishers.push_back(ps);
     }

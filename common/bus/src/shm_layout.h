@@ -87,6 +87,7 @@ struct alignas(64) PublisherEntry {
   uint32_t slot_count;
   uint32_t history;
   std::atomic<uint64_t> published;
+  std::atomic<uint64_t> published_bytes;
   std::atomic<int64_t> last_publish_mono_ns;
 };
 

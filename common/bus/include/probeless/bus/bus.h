@@ -244,8 +244,9 @@ struct PublisherSnapshot {
   size_t max_message_bytes = 0;
   uint32_t slot_count = 0;
   uint32_t history = 0;
-  uint64_t published = 0;
-  int64_t last_publish_mono_ns = 0;
+  uint64_t published = 0;        // messages since the publisher joined
+  uint64_t published_bytes = 0;  // payload bytes since the publisher joined
+  int64_t last_publish_mono_ns = 0;  // CLOCK_MONOTONIC ns of the last Publish()
 };
 
 struct SubscriberSnapshot {
