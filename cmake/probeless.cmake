@@ -35,6 +35,9 @@ function(probeless_add_test)
   endif()
   set_tests_properties(${T_NAME} PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}"
     ENVIRONMENT "PROBELESS_DOMAIN=ctest_${T_NAME}")
+  if("sanitize" IN_LIST T_LABELS OR "tsan" IN_LIST T_LABELS)
+    add_dependencies(sanitize_targets ${T_NAME})
+  endif()
 endfunction()
 
 # probeless_add_tool(NAME <name> SOURCES <files...> LIBS <targets...>)
@@ -43,4 +46,29 @@ function(probeless_add_tool)
   cmake_parse_arguments(T "" "NAME" "SOURCES;LIBS" ${ARGN})
   add_executable(${T_NAME} ${T_SOURCES})
   target_link_libraries(${T_NAME} PRIVATE ${T_LIBS})
+endfunction()
+
+# Aggregate targets for tools/test: what the sanitizer builds and the fuzz build compile.
+add_custom_target(sanitize_targets)
+add_custom_target(fuzz_targets)
+
+# probeless_sanitize_depends(<targets...>): build these in the sanitizer builds too (tests labelled
+# "sanitize" or "tsan" are added automatically; add the executables such tests run).
+function(probeless_sanitize_depends)
+  add_dependencies(sanitize_targets ${ARGN})
+endfunction()
+
+# probeless_add_fuzzer(NAME <name> SOURCES <files...> LIBS <targets...>)
+# A libFuzzer target in <build>/fuzz/<name>, built only with -DPROBELESS_BUILD_FUZZERS=ON (clang).
+function(probeless_add_fuzzer)
+  cmake_parse_arguments(F "" "NAME" "SOURCES;LIBS" ${ARGN})
+  if(NOT PROBELESS_BUILD_FUZZERS)
+    return()
+  endif()
+  add_executable(${F_NAME} ${F_SOURCES})
+  target_compile_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
+  target_link_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
+  target_link_libraries(${F_NAME} PRIVATE ${F_LIBS})
+  set_target_properties(${F_NAME} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/fuzz)
+  add_dependencies(fuzz_targets ${F_NAME})
 endfunction()
