@@ -199,11 +199,30 @@ TEST_F(BusTest, PoolExhaustionIsReportedAndRecovers) {
     pub.Borrow(8);
     FAIL() << "expected BusError";
   } catch (const BusError& e) {
-    EXPECT_NE(std::string(e.what()).find("all 2 slots of the publisher are in use"),
+    EXPECT_NE(std::string(e.what()).find("all 2 slots of the publisher are held"),
               std::string::npos);
   }
   a->Release();
   EXPECT_NO_THROW(PublishText(pub, "c"));
+}
+
+TEST_F(BusTest, DeepQueuesNeverExhaustThePool) {
+  // Queues deeper than the pool: the publisher drops the slowest subscriber's oldest message.
+  Publisher pub("/t/deep", kBlob, Options(8, 4));
+  Subscriber slow("/t/deep", kBlob, {.queue_depth = 64});
+  Subscriber fast("/t/deep", kBlob, {.queue_depth = 64});
+  uint64_t fast_received = 0;
+  for (int i = 1; i <= 100; ++i) {
+    ASSERT_NO_THROW(PublishText(pub, std::to_string(i)));
+    while (auto s = fast.TryTake()) ++fast_received;
+  }
+  EXPECT_EQ(fast_received, 100u);
+  EXPECT_EQ(fast.dropped(), 0u);
+  EXPECT_EQ(slow.dropped() + slow.queued(), 100u);
+  EXPECT_LE(slow.queued(), 4u);
+  std::string last;
+  while (auto s = slow.TryTake()) last = Text(*s);
+  EXPECT_EQ(last, "100");
 }
 
 TEST_F(BusTest, UnpublishedLoanReturnsItsSlot) {

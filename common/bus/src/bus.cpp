@@ -37,9 +37,87 @@ struct PublisherImpl {
   size_t capacity = 0;
   uint32_t history = 0;
   uint64_t sequence = 0;
-  std::vector<QueueEntry> dropped;  // scratch, reused by every Publish
 
   SlotHeader* Slot(uint32_t slot) const { return TopicHandle::Slot(*mapping, slot); }
+
+  // Drop-oldest at the pool: removes the oldest entry naming one of our slots from the queue of the
+  // subscriber that has most of them queued (the slowest), counting it as that subscriber's drop.
+  // Returns false if no queue holds any of our slots (then only held samples pin them).
+  bool StealOldestQueued() {
+    TopicControl* ctrl = topic->ctrl();
+    auto mine = [&](const QueueEntry& e) {
+      return e.pub_index == index && e.pub_generation == generation;
+    };
+    int best = -1;
+    uint32_t best_count = 0;
+    for (uint32_t i = 0; i < kMaxSubscribersPerTopic; ++i) {
+      SubscriberEntry& sub = ctrl->subscribers[i];
+      if (sub.state.load(std::memory_order_acquire) != kActive) continue;
+      RobustLock lock(&sub.mutex);
+      uint32_t n = 0;
+      for (uint32_t k = 0; k < sub.count; ++k) n += mine(sub.ring[(sub.head + k) % kMaxQueueDepth]);
+      if (n > best_count) {
+        best = static_cast<int>(i);
+        best_count = n;
+      }
+    }
+    if (best < 0) return false;
+    SubscriberEntry& sub = ctrl->subscribers[best];
+    std::optional<QueueEntry> stolen;
+    {
+      RobustLock lock(&sub.mutex);
+      for (uint32_t k = 0; k < sub.count; ++k) {
+        if (!mine(sub.ring[(sub.head + k) % kMaxQueueDepth])) continue;
+        stolen = sub.ring[(sub.head + k) % kMaxQueueDepth];
+        for (uint32_t j = k; j + 1 < sub.count; ++j) {
+          sub.ring[(sub.head + j) % kMaxQueueDepth] = sub.ring[(sub.head + j + 1) % kMaxQueueDepth];
+        }
+        sub.count -= 1;
+        sub.dropped.fetch_add(1, std::memory_order_relaxed);
+        Slot(stolen->slot)->refs.fetch_sub(1, std::memory_order_acq_rel);
+        break;
+      }
+    }
+    return true;  // stolen, or consumed meanwhile: try the pool again
+  }
+
+  // Recomputes the reference counts of our slots from the tables that hold the references (every
+  // subscriber's queue and held samples, and our history), under all their locks. Repairs counts
+  // left off by a participant killed inside a critical section. Returns the slots repaired.
+  uint32_t AuditSlots() {
+    TopicControl* ctrl = topic->ctrl();
+    RobustLock topic_lock(&ctrl->mutex);
+    RobustLock history_lock(&header->history_mutex);
+    std::vector<std::unique_ptr<RobustLock>> sub_locks;
+    std::vector<uint32_t> counts(header->slot_count, 0);
+    auto count = [&](const QueueEntry& e) {
+      if (e.pub_index == index && e.pub_generation == generation && e.slot < counts.size()) {
+        counts[e.slot] += 1;
+      }
+    };
+    for (auto& sub : ctrl->subscribers) {
+      sub_locks.push_back(std::make_unique<RobustLock>(&sub.mutex));
+      if (sub.state.load() != kActive) continue;
+      for (uint32_t k = 0; k < sub.count; ++k) count(sub.ring[(sub.head + k) % kMaxQueueDepth]);
+      for (uint32_t i = 0; i < kMaxHeldSamples; ++i) {
+        if (sub.held_mask & (1u << i)) count(sub.held[i]);
+      }
+    }
+    for (uint32_t i = 0; i < header->history_count; ++i) {
+      counts[header->history_slots[(header->history_head + i) % kMaxHistory]] += 1;
+    }
+    uint32_t repaired = 0;
+    for (uint32_t s = 0; s < header->slot_count; ++s) {
+      auto& refs = Slot(s)->refs;
+      const uint32_t before = refs.load();
+      const uint32_t after = (before & kLoanBit) | counts[s];
+      if (before != after) {
+        refs.store(after, std::memory_order_release);
+        ++repaired;
+      }
+    }
+    return repaired;
+  }
   std::byte* Payload(uint32_t slot) const {
     return reinterpret_cast<std::byte*>(Slot(slot)) + kSlotHeaderBytes;
   }
@@ -69,8 +147,8 @@ struct SubscriberImpl {
       assert(entry->held_mask & (1u << held_index));
       ref = entry->held[held_index];
       entry->held_mask &= ~(1u << held_index);
+      topic->DecRef(ref);
     }
-    topic->DecRef(ref, /*topic_locked=*/false);
     if (topic->ctrl()->publishers[ref.pub_index].state.load(std::memory_order_acquire) == kZombie) {
       topic->Maintain();
     }
@@ -229,7 +307,6 @@ Publisher::Publisher(std::string_view topic, const TopicType& type,
   auto impl = std::make_shared<internal::PublisherImpl>();
   impl->capacity = options.max_message_bytes;
   impl->history = options.history;
-  impl->dropped.reserve(kMaxSubscribersPerTopic);
   const size_t stride = internal::AlignUp(internal::kSlotHeaderBytes + impl->capacity, 64);
   const size_t bytes = internal::SlotsOffset() + stride * options.slot_count;
 
@@ -258,10 +335,22 @@ Publisher::Publisher(std::string_view topic, const TopicType& type,
     impl->topic = TopicHandle::Join(domain, topic, [&](TopicHandle& handle) {
       handle.CheckTypeLocked(type);
       auto* ctrl = handle.ctrl();
+      bool any_free = false;
+      for (const auto& e : ctrl->publishers) any_free |= e.state.load() == kFree;
+      if (!any_free) {
+        // Publishers that left (or crashed) but whose messages are still queued somewhere give
+        // way to a live one: the oldest-joined zombie is purged.
+        for (uint32_t i = 0; i < kMaxPublishersPerTopic; ++i) {
+          if (ctrl->publishers[i].state.load() == internal::kZombie) {
+            handle.PurgeZombieLocked(i);
+            break;
+          }
+        }
+      }
       for (uint32_t i = 0; i < kMaxPublishersPerTopic; ++i) {
         internal::PublisherEntry& e = ctrl->publishers[i];
         if (e.state.load() != kFree) continue;
-        e.generation += 1;
+        e.generation.fetch_add(1, std::memory_order_acq_rel);
         e.owner = self;
         internal::CopyText(e.segment, sizeof(e.segment), impl->segment_name);
         internal::CopyText(e.node_name, sizeof(e.node_name), options.node_name);
@@ -275,7 +364,7 @@ Publisher::Publisher(std::string_view topic, const TopicType& type,
         e.last_publish_mono_ns.store(0);
         e.state.store(kActive, std::memory_order_release);
         impl->index = i;
-        impl->generation = e.generation;
+        impl->generation = e.generation.load();
         impl->entry = &e;
         return;
       }
@@ -301,7 +390,9 @@ Loan Publisher::Borrow(size_t bytes) {
                    std::to_string(impl.capacity));
   }
   const uint32_t slots = impl.header->slot_count;
-  for (int attempt = 0; attempt < 2; ++attempt) {
+  // Bounded: every round either finds a slot or removes one queue reference of ours.
+  const int max_rounds = 2 + static_cast<int>(kMaxSubscribersPerTopic * kMaxQueueDepth);
+  for (int round = 0; round < max_rounds; ++round) {
     // The lowest free slot: the pool's footprint stays at the slots really in flight.
     for (uint32_t s = 0; s < slots; ++s) {
       auto& refs = impl.Slot(s)->refs;
@@ -317,10 +408,14 @@ Loan Publisher::Borrow(size_t bytes) {
         return loan;
       }
     }
-    impl.topic->Maintain();  // reclaims slots of dead subscribers
+    if (round == 0) {
+      impl.topic->Maintain();  // reclaims slots of dead subscribers
+    } else if (!impl.StealOldestQueued() && impl.AuditSlots() == 0) {
+      break;  // every slot is held (or loaned): nothing to drop
+    }
   }
   throw BusError("topic '" + impl.topic->topic() + "': all " + std::to_string(slots) +
-                 " slots of the publisher are in use (held by subscribers or unpublished loans); "
+                 " slots of the publisher are held by subscribers' samples or unpublished loans; "
                  "raise slot_count or release samples sooner");
 }
 
@@ -341,7 +436,6 @@ uint64_t Publisher::Publish(Loan&& loan) {
 
   internal::TopicControl* ctrl = impl.topic->ctrl();
   const QueueEntry ref{impl.index, impl.generation, slot, 0};
-  impl.dropped.clear();
   {
     std::optional<RobustLock> history_lock;
     if (impl.history > 0) history_lock.emplace(&impl.header->history_mutex);
@@ -352,7 +446,7 @@ uint64_t Publisher::Publish(Loan&& loan) {
         if (sub.state.load(std::memory_order_relaxed) != kActive) continue;
         header->refs.fetch_add(1, std::memory_order_relaxed);
         if (sub.count == sub.depth) {  // drop-oldest
-          impl.dropped.push_back(sub.ring[sub.head]);
+          impl.topic->DecRef(sub.ring[sub.head]);
           sub.head = (sub.head + 1) % kMaxQueueDepth;
           sub.count -= 1;
           sub.dropped.fetch_add(1, std::memory_order_relaxed);
@@ -378,7 +472,6 @@ uint64_t Publisher::Publish(Loan&& loan) {
     }
   }
   header->refs.fetch_sub(kLoanBit, std::memory_order_acq_rel);
-  for (const auto& dropped : impl.dropped) impl.topic->DecRef(dropped, /*topic_locked=*/false);
   impl.entry->published.fetch_add(1, std::memory_order_relaxed);
   impl.entry->published_bytes.fetch_add(header->size, std::memory_order_relaxed);
   impl.entry->last_publish_mono_ns.store(header->publish_mono_ns, std::memory_order_relaxed);
@@ -445,14 +538,13 @@ Subscriber::Subscriber(std::string_view topic, const TopicType& type,
       for (uint32_t p = 0; p < kMaxPublishersPerTopic; ++p) {
         const auto& pub = ctrl->publishers[p];
         if (pub.state.load() != kActive || pub.history == 0) continue;
-        auto mapping = handle.PublisherMapping(p, pub.generation, /*topic_locked=*/true);
+        auto mapping = handle.PublisherMapping(p, pub.generation.load());
         if (!mapping) continue;
         history_locks.push_back(
             std::make_unique<RobustLock>(&TopicHandle::Header(*mapping)->history_mutex));
-        sources.push_back({p, pub.generation, std::move(mapping)});
+        sources.push_back({p, pub.generation.load(), std::move(mapping)});
       }
     }
-    std::vector<QueueEntry> dropped;
     {
       RobustLock lock(&e.mutex);
       e.owner = internal::Self();
@@ -470,7 +562,7 @@ Subscriber::Subscriber(std::string_view topic, const TopicType& type,
           const uint32_t slot = h->history_slots[(h->history_head + i) % kMaxHistory];
           TopicHandle::Slot(*source.mapping, slot)->refs.fetch_add(1, std::memory_order_relaxed);
           if (e.count == e.depth) {
-            dropped.push_back(e.ring[e.head]);
+            handle.DecRef(e.ring[e.head]);
             e.head = (e.head + 1) % kMaxQueueDepth;
             e.count -= 1;
           }
@@ -483,7 +575,6 @@ Subscriber::Subscriber(std::string_view topic, const TopicType& type,
       e.state.store(kActive, std::memory_order_release);
     }
     history_locks.clear();
-    for (const auto& ref : dropped) handle.DecRef(ref, /*topic_locked=*/true);
     impl->index = index;
     impl->entry = &e;
   });
@@ -515,7 +606,7 @@ std::optional<Sample> Subscriber::TryTake() {
       e.held[held_index] = ref;
       e.held_mask |= 1u << held_index;
     }
-    auto mapping = impl.topic->PublisherMapping(ref.pub_index, ref.pub_generation, false);
+    auto mapping = impl.topic->PublisherMapping(ref.pub_index, ref.pub_generation);
     if (!mapping) {
       // Its publisher crashed and was reclaimed: the message is gone. Count it as dropped.
       RobustLock lock(&e.mutex);

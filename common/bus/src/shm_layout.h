@@ -76,8 +76,8 @@ struct alignas(64) SubscriberEntry {
 };
 
 struct alignas(64) PublisherEntry {
-  std::atomic<uint32_t> state;  // EntryState; changes only under the topic mutex
-  uint32_t generation;          // +1 every time the entry is taken
+  std::atomic<uint32_t> state;       // EntryState; changes only under the topic mutex
+  std::atomic<uint32_t> generation;  // +1 every time the entry is taken (before its fields change)
   ProcessId owner;
   char segment[kSegmentNameBytes];
   char node_name[kTextBytes];

@@ -116,8 +116,7 @@ SlotHeader* TopicHandle::Slot(const Mapping& mapping, uint32_t slot) {
   return reinterpret_cast<SlotHeader*>(mapping.base() + SlotsOffset() + slot * header->stride);
 }
 
-std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t generation,
-                                                       bool topic_locked) {
+std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t generation) {
   assert(index < kMaxPublishersPerTopic);
   {
     std::lock_guard<std::mutex> guard(cache_mutex_);
@@ -125,16 +124,17 @@ std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t 
       return cache_[index].mapping;
     }
   }
-  std::string segment;
-  size_t bytes = 0;
-  {
-    std::optional<RobustLock> lock;
-    if (!topic_locked) lock.emplace(&ctrl_->mutex);
-    const PublisherEntry& entry = ctrl_->publishers[index];
-    if (entry.state.load() == kFree || entry.generation != generation) return nullptr;
-    segment = entry.segment;
-    bytes = entry.segment_bytes;
-  }
+  const PublisherEntry& entry = ctrl_->publishers[index];
+  auto current = [&] {
+    return entry.state.load(std::memory_order_acquire) != kFree &&
+           entry.generation.load(std::memory_order_acquire) == generation;
+  };
+  if (!current()) return nullptr;
+  char segment[kSegmentNameBytes];
+  std::memcpy(segment, entry.segment, sizeof(segment));
+  segment[kSegmentNameBytes - 1] = '\0';
+  const size_t bytes = entry.segment_bytes;
+  if (!current()) return nullptr;  // the entry was reused while we read it
   std::shared_ptr<Mapping> mapping = OpenSegment(segment, bytes);
   if (!mapping || Header(*mapping)->magic != kPublisherMagic) return nullptr;
   std::lock_guard<std::mutex> guard(cache_mutex_);
@@ -142,20 +142,38 @@ std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t 
   return mapping;
 }
 
-void TopicHandle::DecRef(const QueueEntry& entry, bool topic_locked) {
-  auto mapping = PublisherMapping(entry.pub_index, entry.pub_generation, topic_locked);
-  if (!mapping) return;  // its publisher is gone (crash-reclaimed): nothing to release
+void TopicHandle::DecRef(const QueueEntry& entry) {
+  auto mapping = PublisherMapping(entry.pub_index, entry.pub_generation);
+  if (!mapping) return;  // its publisher is gone (purged or reclaimed): nothing to release
   SlotHeader* slot = Slot(*mapping, entry.slot);
   const uint32_t before = slot->refs.fetch_sub(1, std::memory_order_acq_rel);
   assert((before & ~kLoanBit) != 0 && "slot reference count underflow");
   (void)before;
 }
 
+bool TopicHandle::Referenced(uint32_t index, uint32_t generation) {
+  for (auto& sub : ctrl_->subscribers) {
+    if (sub.state.load() != kActive) continue;
+    RobustLock lock(&sub.mutex);
+    for (uint32_t k = 0; k < sub.count; ++k) {
+      const QueueEntry& e = sub.ring[(sub.head + k) % kMaxQueueDepth];
+      if (e.pub_index == index && e.pub_generation == generation) return true;
+    }
+    for (uint32_t i = 0; i < kMaxHeldSamples; ++i) {
+      const QueueEntry& e = sub.held[i];
+      if ((sub.held_mask & (1u << i)) && e.pub_index == index && e.pub_generation == generation) {
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
 void TopicHandle::FreeSubscriberLocked(uint32_t index) {
   SubscriberEntry& sub = ctrl_->subscribers[index];
-  std::vector<QueueEntry> refs;
   {
     RobustLock lock(&sub.mutex);
+    std::vector<QueueEntry> refs;
     for (uint32_t i = 0; i < sub.count; ++i)
       refs.push_back(sub.ring[(sub.head + i) % kMaxQueueDepth]);
     for (uint32_t i = 0; i < kMaxHeldSamples; ++i) {
@@ -164,16 +182,16 @@ void TopicHandle::FreeSubscriberLocked(uint32_t index) {
     sub.count = 0;
     sub.head = 0;
     sub.held_mask = 0;
+    for (const auto& ref : refs) DecRef(ref);
     sub.state.store(kFree, std::memory_order_release);
     sub.generation += 1;
   }
-  for (const auto& ref : refs) DecRef(ref, /*topic_locked=*/true);
 }
 
 void TopicHandle::RetirePublisherLocked(uint32_t index, bool crashed) {
   PublisherEntry& entry = ctrl_->publishers[index];
   if (entry.state.load() != kActive) return;
-  auto mapping = PublisherMapping(index, entry.generation, /*topic_locked=*/true);
+  auto mapping = PublisherMapping(index, entry.generation.load());
   if (mapping) {
     PublisherHeader* header = Header(*mapping);
     {
@@ -205,19 +223,40 @@ void TopicHandle::RetirePublisherLocked(uint32_t index, bool crashed) {
 bool TopicHandle::TryFreeZombieLocked(uint32_t index) {
   PublisherEntry& entry = ctrl_->publishers[index];
   if (entry.state.load() != kZombie) return false;
-  auto mapping = PublisherMapping(index, entry.generation, /*topic_locked=*/true);
-  if (mapping) {
-    const PublisherHeader* header = Header(*mapping);
-    for (uint32_t s = 0; s < header->slot_count; ++s) {
-      if (Slot(*mapping, s)->refs.load(std::memory_order_acquire) != 0) return false;
-    }
-  }
+  // The subscribers' tables are the truth (a process killed inside a critical section may have
+  // left a reference count off by one; a zombie never gains new references).
+  if (Referenced(index, entry.generation.load())) return false;
   UnlinkSegment(entry.segment);
   unlinked_.push_back(entry.segment);
   entry.state.store(kFree, std::memory_order_release);
   std::lock_guard<std::mutex> guard(cache_mutex_);
   cache_[index] = {};
   return true;
+}
+
+void TopicHandle::PurgeZombieLocked(uint32_t index) {
+  PublisherEntry& entry = ctrl_->publishers[index];
+  assert(entry.state.load() == kZombie);
+  for (auto& sub : ctrl_->subscribers) {
+    if (sub.state.load() != kActive) continue;
+    RobustLock lock(&sub.mutex);
+    uint32_t kept = 0;
+    for (uint32_t k = 0; k < sub.count; ++k) {
+      const QueueEntry e = sub.ring[(sub.head + k) % kMaxQueueDepth];
+      if (e.pub_index == index && e.pub_generation == entry.generation.load()) {
+        sub.dropped.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      sub.ring[(sub.head + kept) % kMaxQueueDepth] = e;
+      ++kept;
+    }
+    sub.count = kept;
+  }
+  UnlinkSegment(entry.segment);
+  unlinked_.push_back(entry.segment);
+  entry.state.store(kFree, std::memory_order_release);
+  std::lock_guard<std::mutex> guard(cache_mutex_);
+  cache_[index] = {};
 }
 
 void TopicHandle::MaintainLocked(bool full_check) {

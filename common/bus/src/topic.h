@@ -42,13 +42,19 @@ class TopicHandle {
   // Throws BusError unless the topic carries `type` (fixes it if no participant did yet). Locked.
   void CheckTypeLocked(const TopicType& type);
 
-  // The mapping of publisher `index` at `generation`, or nullptr if that publisher is gone.
-  std::shared_ptr<Mapping> PublisherMapping(uint32_t index, uint32_t generation, bool topic_locked);
+  // The mapping of publisher `index` at `generation`, or nullptr if that publisher is gone. Takes
+  // no shared-memory lock (the entry is read seqlock-style, validated by its generation), so it may
+  // be called under any bus lock.
+  std::shared_ptr<Mapping> PublisherMapping(uint32_t index, uint32_t generation);
   static SlotHeader* Slot(const Mapping& mapping, uint32_t slot);
   static PublisherHeader* Header(const Mapping& mapping);
 
-  // Drops one reference to the slot a queue entry names.
-  void DecRef(const QueueEntry& entry, bool topic_locked);
+  // Drops one reference to the slot a queue entry names. Callers hold the mutex of the subscriber
+  // whose queue or held table the entry just left, so reference counts always match those tables
+  // whenever all subscriber mutexes are held (see PublisherImpl::AuditSlots).
+  void DecRef(const QueueEntry& entry);
+  // True if any subscriber's queue or held table names a slot of publisher `index` at `generation`.
+  bool Referenced(uint32_t index, uint32_t generation);
 
   // Reclaims dead participants and frees zombie publishers whose slots are all released. With
   // full_check, liveness also compares process start times (pid reuse). Locked.
@@ -67,6 +73,10 @@ class TopicHandle {
   void RetirePublisherLocked(uint32_t index, bool crashed);
   // Frees a zombie whose slots are all released; returns true if freed. Locked.
   bool TryFreeZombieLocked(uint32_t index);
+  // Frees a zombie even though subscribers still reference it: its queued messages are dropped
+  // (counted), samples already taken stay valid (they keep the segment mapped). For when a new
+  // publisher needs the registry entry. Locked.
+  void PurgeZombieLocked(uint32_t index);
 
   // Segment names unlinked by maintenance since the last call (for CleanDeadSegments).
   std::vector<std::string> TakeUnlinked();

@@ -170,8 +170,10 @@ class Publisher {
   Publisher(Publisher&&) noexcept;
   Publisher& operator=(Publisher&&) noexcept;
 
-  // Loans a free slot with `bytes` of payload (≤ max_message_bytes). Throws BusError if the message
-  // is too large or every slot is still referenced.
+  // Loans a free slot with `bytes` of payload (≤ max_message_bytes). When every slot is referenced,
+  // the oldest queued (not yet taken) message of this publisher is dropped from the slowest
+  // subscriber's queue until one is free, so deep queues never block the publisher. Throws BusError
+  // if the message is too large or every slot is held by taken samples or unpublished loans.
   Loan Borrow(size_t bytes);
   // Publishes a loan of this publisher to every current subscriber; the loan becomes invalid.
   // Returns the message's sequence number.
