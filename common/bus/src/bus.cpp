@@ -487,7 +487,9 @@ uint64_t Publisher::PublishCopy(std::span<const std::byte> bytes) {
 
 uint32_t Publisher::SubscriberCount() const {
   uint32_t n = 0;
-  for (const auto& s : impl_->topic->ctrl()->subscribers) n += s.state.load() == kActive;
+  for (const auto& s : impl_->topic->ctrl()->subscribers) {
+    n += s.state.load() == kActive && internal::ProbablyAlive(s.owner);
+  }
   return n;
 }
 
@@ -655,7 +657,9 @@ uint32_t Subscriber::queued() const {
 
 uint32_t Subscriber::PublisherCount() const {
   uint32_t n = 0;
-  for (const auto& p : impl_->topic->ctrl()->publishers) n += p.state.load() == kActive;
+  for (const auto& p : impl_->topic->ctrl()->publishers) {
+    n += p.state.load() == kActive && internal::ProbablyAlive(p.owner);
+  }
   return n;
 }
 

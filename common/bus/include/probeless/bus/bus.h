@@ -181,7 +181,7 @@ class Publisher {
   // Convenience: Borrow + copy + Publish.
   uint64_t PublishCopy(std::span<const std::byte> bytes);
 
-  // Number of subscribers currently registered on the topic.
+  // Number of live subscribers registered on the topic (dead ones not yet reclaimed excluded).
   uint32_t SubscriberCount() const;
   const std::string& topic() const;
   size_t max_message_bytes() const;
@@ -209,7 +209,7 @@ class Subscriber {
   uint64_t dropped() const;
   // Messages currently queued for this subscriber.
   uint32_t queued() const;
-  // Number of publishers currently registered on the topic.
+  // Number of live publishers registered on the topic (dead ones not yet reclaimed excluded).
   uint32_t PublisherCount() const;
   const std::string& topic() const;
 
