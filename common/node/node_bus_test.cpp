@@ -1,0 +1,199 @@
+// Integration tests of the node runtime with the real bus: typed publishers and subscribers,
+// remapped topics, introspection names, and Spin.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <filesystem>
+#include <thread>
+
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+
+namespace probeless::node {
+namespace {
+
+using namespace std::chrono_literals;
+
+std::vector<std::string> Argv(std::vector<std::string> args) {
+  args.insert(args.begin(), "prog");
+  return args;
+}
+
+// Runs `body` (returning an exit code) in a forked child; its locals (bus objects) are destroyed
+// before the child exits, so it leaves nothing in /dev/shm.
+template <class F>
+int RunInChild(F&& body) {
+  const pid_t pid = fork();
+  if (pid == 0) _exit(body());
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return status;
+}
+
+bus::SubscriberOptions Depth(uint32_t depth) {
+  bus::SubscriberOptions options;
+  options.queue_depth = depth;
+  return options;
+}
+
+// This user's segments of the test's domain currently in /dev/shm.
+std::vector<std::string> Segments() {
+  const std::string prefix =
+      "probeless." + std::to_string(getuid()) + "." + bus::CurrentDomain() + ".";
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator("/dev/shm")) {
+    const std::string name = entry.path().filename().string();
+    if (name.starts_with(prefix)) names.push_back(name);
+  }
+  return names;
+}
+
+class NodeBusTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    bus::CleanDeadSegments();
+    ASSERT_TRUE(Segments().empty());
+  }
+  // Every test (and child process) must leave nothing behind.
+  void TearDown() override { EXPECT_EQ(Segments(), std::vector<std::string>{}); }
+};
+
+const bus::TopicSnapshot* FindTopic(const std::vector<bus::TopicSnapshot>& topics,
+                                    const std::string& name) {
+  for (const bus::TopicSnapshot& t : topics) {
+    if (t.topic == name) return &t;
+  }
+  return nullptr;
+}
+
+TEST_F(NodeBusTest, PublisherAndSubscriberTalkWithTypeAndNodeNames) {
+  Node talker(Argv({"--ros-args", "-r", "__ns:=/demo"}), "talker");
+  Node listener(Argv({"--ros-args", "-r", "__ns:=/demo", "-r", "heard:=chatter"}), "listener");
+  bus::PublisherOptions options;
+  options.max_message_bytes = msgs::Image::MessageBytesFor(64, 48, msgs::Encoding::kRgb8);
+  bus::Publisher pub = talker.CreatePublisher<msgs::Image>("chatter", options);
+  bus::Subscriber sub = listener.CreateSubscriber<msgs::Image>("heard", Depth(4));
+  EXPECT_EQ(pub.topic(), "/demo/chatter");
+  EXPECT_EQ(sub.topic(), "/demo/chatter");
+  EXPECT_EQ(pub.SubscriberCount(), 1u);
+
+  const auto topics = bus::ListTopics();
+  const bus::TopicSnapshot* topic = FindTopic(topics, "/demo/chatter");
+  ASSERT_NE(topic, nullptr);
+  EXPECT_EQ(topic->type.name, "probeless_msgs/Image");
+  EXPECT_EQ(topic->type.layout_hash, msgs::Image::kLayoutHash);
+  ASSERT_EQ(topic->publishers.size(), 1u);
+  EXPECT_EQ(topic->publishers[0].node_name, "/demo/talker");
+  ASSERT_EQ(topic->subscribers.size(), 1u);
+  EXPECT_EQ(topic->subscribers[0].node_name, "/demo/listener");
+
+  for (uint64_t seq = 1; seq <= 3; ++seq) {
+    bus::Loan loan = pub.Borrow(msgs::Image::MessageBytesFor(64, 48, msgs::Encoding::kRgb8));
+    msgs::WriteView<msgs::Image> out = msgs::WriteMessage<msgs::Image>(loan.data());
+    out->header.sequence = seq;
+    out->header.SetFrameId("camera");
+    out->header.StampNow();
+    out->Init(64, 48, msgs::Encoding::kRgb8);
+    std::span<uint8_t> pixels = msgs::ImageChannels<uint8_t>(*out, out.payload);
+    std::memset(pixels.data(), static_cast<int>(seq), pixels.size());
+    pub.Publish(std::move(loan));
+  }
+  for (uint64_t seq = 1; seq <= 3; ++seq) {
+    std::optional<bus::Sample> sample = sub.Take(1s);
+    ASSERT_TRUE(sample);
+    msgs::ReadView<msgs::Image> in = msgs::ReadMessage<msgs::Image>(sample->data());
+    EXPECT_EQ(in->header.sequence, seq);
+    EXPECT_EQ(in->header.FrameId(), "camera");
+    EXPECT_EQ(in->width, 64u);
+    std::span<const uint8_t> pixels = msgs::ImageChannels<uint8_t>(*in, in.payload);
+    EXPECT_EQ(pixels.size(), 64u * 48 * 3);
+    EXPECT_EQ(pixels.back(), seq);
+  }
+}
+
+TEST_F(NodeBusTest, FixedSizeTypesNeedNoCapacityAndPayloadTypesDo) {
+  Node node(Argv({}), "n");
+  bus::Publisher pose = node.CreatePublisher<msgs::Pose>("pose");
+  EXPECT_EQ(pose.max_message_bytes(), sizeof(msgs::Pose));
+  EXPECT_EQ(pose.topic(), "/pose");
+  try {
+    node.CreatePublisher<msgs::Image>("image");
+    FAIL() << "no error";
+  } catch (const NodeError& e) {
+    EXPECT_STREQ(e.what(),
+                 "node '/n': publisher of probeless_msgs/Image on 'image' needs "
+                 "options.max_message_bytes (the type has a variable payload)");
+  }
+  // A subscriber of another type on the same topic is refused by the bus.
+  EXPECT_THROW(node.CreateSubscriber<msgs::ShLight>("pose"), bus::BusError);
+  bus::Subscriber ok_sub = node.CreateSubscriber<msgs::Pose>("/pose");
+  EXPECT_EQ(ok_sub.PublisherCount(), 1u);
+}
+
+TEST_F(NodeBusTest, SpinDeliversToHandlersAndReturnsOnShutdown) {
+  const int status = RunInChild([] {
+    Node node(Argv({}), "spinner");
+    bus::Publisher pub = node.CreatePublisher<msgs::ShLight>("light");
+    bus::Subscriber a = node.CreateSubscriber<msgs::ShLight>("light", Depth(16));
+    bus::Subscriber b = node.CreateSubscriber<msgs::ShLight>("light", Depth(16));
+    std::vector<uint64_t> got_a, got_b;
+    std::thread producer([&] {
+      for (uint64_t i = 1; i <= 5; ++i) {
+        std::this_thread::sleep_for(5ms);
+        bus::Loan loan = pub.Borrow(sizeof(msgs::ShLight));
+        msgs::WriteMessage<msgs::ShLight>(loan.data())->header.sequence = i;
+        pub.Publish(std::move(loan));
+      }
+    });
+    auto record = [](std::vector<uint64_t>& into) {
+      return [&into](bus::Sample&& sample) {
+        into.push_back(msgs::ReadMessage<msgs::ShLight>(sample.data())->header.sequence);
+      };
+    };
+    std::thread stopper([&] {
+      producer.join();
+      std::this_thread::sleep_for(100ms);
+      kill(getpid(), SIGINT);
+    });
+    const auto start = std::chrono::steady_clock::now();
+    Spin({{&a, record(got_a)}, {&b, record(got_b)}});
+    const auto spun = std::chrono::steady_clock::now() - start;
+    stopper.join();
+    const std::vector<uint64_t> expected = {1, 2, 3, 4, 5};
+    if (got_a != expected || got_b != expected) return 40;
+    if (spun > 2s) return 41;
+    return 0;
+  });
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+TEST_F(NodeBusTest, IdleSpinReturnsWithinThePollPeriodOfTheSignal) {
+  const int status = RunInChild([] {
+    Node node(Argv({}), "idle");
+    bus::Subscriber sub = node.CreateSubscriber<msgs::Pose>("nothing");
+    bus::WaitSet wait_set;
+    wait_set.Add(sub);
+    std::chrono::steady_clock::time_point signalled;
+    std::thread stopper([&] {
+      std::this_thread::sleep_for(100ms);
+      signalled = std::chrono::steady_clock::now();
+      kill(getpid(), SIGINT);
+    });
+    int calls = 0;
+    Spin(wait_set, [&](size_t) { ++calls; });
+    const auto returned = std::chrono::steady_clock::now();
+    stopper.join();
+    if (calls != 0) return 50;
+    if (returned - signalled > kShutdownPollPeriod + 80ms) return 51;
+    return 0;
+  });
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+}  // namespace
+}  // namespace probeless::node

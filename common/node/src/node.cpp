@@ -1,0 +1,426 @@
+#include "probeless/node/node.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cctype>
+#include <climits>
+#include <cstdlib>
+#include <map>
+#include <mutex>
+
+#include "arguments.h"
+#include "names.h"
+#include "params.h"
+
+namespace probeless::node {
+
+using internal::ParamValue;
+
+namespace {
+
+std::mutex& LogMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+void WriteAll(int fd, std::string_view text) {
+  while (!text.empty()) {
+    const ssize_t n = ::write(fd, text.data(), text.size());
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return;  // stderr is gone: nothing sensible left to report to
+    }
+    text.remove_prefix(static_cast<size_t>(n));
+  }
+}
+
+template <class T>
+constexpr std::string_view ExpectedTypeName() {
+  if constexpr (std::is_same_v<T, bool>) return "bool";
+  if constexpr (std::is_same_v<T, int64_t> || std::is_same_v<T, int>) return "integer";
+  if constexpr (std::is_same_v<T, double>) return "double";
+  if constexpr (std::is_same_v<T, std::string>) return "string";
+  if constexpr (std::is_same_v<T, std::vector<double>>) return "double_array";
+  if constexpr (std::is_same_v<T, std::vector<int64_t>>) return "integer_array";
+  if constexpr (std::is_same_v<T, std::vector<std::string>>) return "string_array";
+}
+
+template <class T>
+ParamValue ToParamValue(const T& value) {
+  if constexpr (std::is_same_v<T, int>) {
+    return static_cast<int64_t>(value);
+  } else {
+    return value;
+  }
+}
+
+// Converts `value` to T; false if the types are incompatible.
+template <class T>
+bool ConvertParam(const ParamValue& value, T& out) {
+  if constexpr (std::is_same_v<T, double>) {
+    if (const int64_t* i = std::get_if<int64_t>(&value)) {
+      out = static_cast<double>(*i);
+      return true;
+    }
+  } else if constexpr (std::is_same_v<T, int>) {
+    if (const int64_t* i = std::get_if<int64_t>(&value)) {
+      if (*i < INT_MIN || *i > INT_MAX) return false;
+      out = static_cast<int>(*i);
+      return true;
+    }
+    return false;
+  } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+    if (const auto* ints = std::get_if<std::vector<int64_t>>(&value)) {
+      out.assign(ints->begin(), ints->end());
+      return true;
+    }
+  }
+  if constexpr (std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<int64_t>> ||
+                std::is_same_v<T, std::vector<std::string>>) {
+    if (std::holds_alternative<internal::EmptyArray>(value)) {
+      out.clear();
+      return true;
+    }
+  }
+  if constexpr (!std::is_same_v<T, int>) {
+    if (const T* exact = std::get_if<T>(&value)) {
+      out = *exact;
+      return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+std::string_view LogLevelName(LogLevel level) {
+  switch (level) {
+    case LogLevel::kDebug:
+      return "debug";
+    case LogLevel::kInfo:
+      return "info";
+    case LogLevel::kWarn:
+      return "warn";
+    case LogLevel::kError:
+      return "error";
+  }
+  return "info";
+}
+
+LogLevel ParseLogLevel(std::string_view text) {
+  std::string lower(text);
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (lower == "debug") return LogLevel::kDebug;
+  if (lower == "info") return LogLevel::kInfo;
+  if (lower == "warn" || lower == "warning") return LogLevel::kWarn;
+  if (lower == "error") return LogLevel::kError;
+  throw NodeError("invalid log level '" + std::string(text) +
+                  "' (expected debug, info, warn or error)");
+}
+
+struct Node::Impl {
+  struct Override {
+    ParamValue value;
+    std::string source;
+    bool used = false;
+  };
+  struct Remap {
+    std::string from;  // fully qualified
+    std::string to;    // fully qualified
+  };
+
+  std::string program;
+  std::string name;
+  std::string ns = "/";
+  std::string fqn;
+  std::vector<std::string> own_args;
+  std::vector<Remap> remaps;
+  std::map<std::string, Override, std::less<>> overrides;
+  std::vector<ParamInfo> declared;
+  mutable std::mutex mutex;  // guards overrides and declared
+  std::atomic<int> log_level{static_cast<int>(LogLevel::kInfo)};
+
+  std::string Prefix() const { return "node '" + (fqn.empty() ? name : fqn) + "': "; }
+  [[noreturn]] void Fail(const std::string& message) const { throw NodeError(Prefix() + message); }
+
+  void Init(const std::vector<std::string>& argv, std::string_view default_name) {
+    name = std::string(default_name);
+    if (!internal::IsValidNodeName(name)) {
+      throw NodeError("invalid default node name '" + name +
+                      "' (letters, digits and '_', not starting with a digit)");
+    }
+    internal::ParsedArguments args;
+    try {
+      args = internal::ParseArguments(argv);
+    } catch (const NodeError& e) {
+      Fail(e.what());
+    }
+    program = args.program;
+    own_args = args.own_args;
+
+    // Name and namespace: the first matching rule of each kind wins.
+    bool name_set = false, ns_set = false;
+    for (const internal::RemapRule& rule : args.remaps) {
+      if (!rule.node.empty() && rule.node != default_name) continue;
+      if (rule.from == "__node" && !name_set) {
+        name = rule.to;
+        name_set = true;
+      } else if (rule.from == "__ns" && !ns_set) {
+        ns = rule.to;
+        ns_set = true;
+      }
+    }
+    fqn = internal::FullyQualifiedName(ns, name);
+
+    for (const internal::RemapRule& rule : args.remaps) {
+      if (rule.from == "__node" || rule.from == "__ns") continue;
+      if (!rule.node.empty() && rule.node != name) continue;
+      try {
+        remaps.push_back({internal::ExpandTopicName(rule.from, name, ns),
+                          internal::ExpandTopicName(rule.to, name, ns)});
+      } catch (const NodeError& e) {
+        Fail("remap rule '" + rule.text + "': " + e.what());
+      }
+    }
+
+    // Params files in order (within a file wildcard entries first), then -p rules.
+    for (const std::string& path : args.params_files) {
+      std::vector<internal::ParamsFileEntry> entries;
+      try {
+        entries = internal::ReadParamsFile(path);
+      } catch (const NodeError& e) {
+        Fail(e.what());
+      }
+      for (bool wildcard_pass : {true, false}) {
+        for (const internal::ParamsFileEntry& entry : entries) {
+          if (entry.wildcard != wildcard_pass) continue;
+          if (!internal::MatchNodePattern(entry.pattern, fqn)) continue;
+          for (const auto& [param, value] : entry.params) {
+            overrides[param] = {value, "params file '" + path + "'"};
+          }
+        }
+      }
+    }
+    for (const internal::ParamRule& rule : args.params) {
+      if (!rule.node.empty() && rule.node != name) continue;
+      overrides[rule.name] = {rule.value, "-p"};
+    }
+
+    // Log level: param log_level, else --log-level, else $PROBELESS_LOG_LEVEL, else info.
+    std::string level = "info";
+    std::string level_source = "default";
+    if (const char* env = std::getenv("PROBELESS_LOG_LEVEL"); env != nullptr && *env != '\0') {
+      level = env;
+      level_source = "PROBELESS_LOG_LEVEL";
+    }
+    for (const internal::LogLevelRule& rule : args.log_levels) {
+      if (rule.logger.empty() || rule.logger == name || rule.logger == fqn) {
+        level = rule.level;
+        level_source = "--log-level";
+      }
+    }
+    if (auto it = overrides.find("log_level"); it != overrides.end()) {
+      // A non-string override is reported by the log_level declaration in the constructor.
+      if (const std::string* text = std::get_if<std::string>(&it->second.value)) {
+        level = *text;
+        level_source = it->second.source;
+      }
+    }
+    try {
+      log_level = static_cast<int>(ParseLogLevel(level));
+    } catch (const NodeError& e) {
+      Fail(std::string(e.what()) + " from " + level_source);
+    }
+  }
+
+  void Declare(std::string_view param, std::string_view type, std::string value,
+               std::string source) {
+    for (ParamInfo& info : declared) {
+      if (info.name != param) continue;
+      if (info.type != type) {
+        Fail("parameter '" + std::string(param) + "' declared as " + info.type +
+             ", now requested as " + std::string(type));
+      }
+      info.value = std::move(value);
+      info.source = std::move(source);
+      return;
+    }
+    declared.push_back(
+        {std::string(param), std::string(type), std::move(value), std::move(source)});
+  }
+
+  template <class T>
+  bool Lookup(std::string_view param, T& out, std::string& source) {
+    auto it = overrides.find(param);
+    if (it == overrides.end()) return false;
+    it->second.used = true;
+    source = it->second.source;
+    if (!ConvertParam(it->second.value, out)) {
+      const ParamValue& value = it->second.value;
+      if constexpr (std::is_same_v<T, int>) {
+        if (std::holds_alternative<int64_t>(value)) {
+          Fail("parameter '" + std::string(param) + "' value " + internal::FormatValue(value) +
+               " (from " + source + ") is out of range for int32");
+        }
+      }
+      const std::string shown = std::holds_alternative<std::string>(value)
+                                    ? "\"" + internal::FormatValue(value) + "\""
+                                    : internal::FormatValue(value);
+      Fail("parameter '" + std::string(param) + "' has type " +
+           std::string(internal::TypeName(value)) + " (value " + shown + ", from " + source +
+           "), expected " + std::string(ExpectedTypeName<T>()));
+    }
+    return true;
+  }
+};
+
+Node::Node(int argc, char** argv, std::string_view default_name)
+    : Node(std::vector<std::string>(argv, argv + argc), default_name) {}
+
+Node::Node(const std::vector<std::string>& argv, std::string_view default_name)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->Init(argv, default_name);
+  InstallSignalHandlers();
+  // Declare log_level so it shows in introspection (its value was applied in Init).
+  std::lock_guard lock(impl_->mutex);
+  auto it = impl_->overrides.find("log_level");
+  if (it != impl_->overrides.end()) {
+    std::string ignored;
+    std::string value;
+    impl_->Lookup(std::string_view("log_level"), value, ignored);
+    impl_->Declare("log_level", "string", value, it->second.source);
+  } else {
+    impl_->Declare("log_level", "string", std::string(LogLevelName(log_level())), "default");
+  }
+}
+
+Node::~Node() = default;
+
+const std::string& Node::name() const { return impl_->name; }
+const std::string& Node::namespace_() const { return impl_->ns; }
+const std::string& Node::fully_qualified_name() const { return impl_->fqn; }
+const std::string& Node::program() const { return impl_->program; }
+const std::vector<std::string>& Node::args() const { return impl_->own_args; }
+
+template <ParamType T>
+T Node::Param(std::string_view name, T default_value) {
+  std::lock_guard lock(impl_->mutex);
+  T value{};
+  std::string source;
+  if (!impl_->Lookup(name, value, source)) {
+    value = std::move(default_value);
+    source = "default";
+  }
+  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source);
+  return value;
+}
+
+template <ParamType T>
+T Node::RequireParam(std::string_view name) {
+  std::lock_guard lock(impl_->mutex);
+  T value{};
+  std::string source;
+  if (!impl_->Lookup(name, value, source)) {
+    impl_->Fail("required parameter '" + std::string(name) + "' (" +
+                std::string(ExpectedTypeName<T>()) +
+                ") is not set (give it with -p or a params file)");
+  }
+  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source);
+  return value;
+}
+
+#define PROBELESS_NODE_INSTANTIATE(T)             \
+  template T Node::Param<T>(std::string_view, T); \
+  template T Node::RequireParam<T>(std::string_view);
+PROBELESS_NODE_INSTANTIATE(bool)
+PROBELESS_NODE_INSTANTIATE(int64_t)
+PROBELESS_NODE_INSTANTIATE(int)
+PROBELESS_NODE_INSTANTIATE(double)
+PROBELESS_NODE_INSTANTIATE(std::string)
+PROBELESS_NODE_INSTANTIATE(std::vector<double>)
+PROBELESS_NODE_INSTANTIATE(std::vector<int64_t>)
+PROBELESS_NODE_INSTANTIATE(std::vector<std::string>)
+#undef PROBELESS_NODE_INSTANTIATE
+
+bool Node::HasParamOverride(std::string_view name) const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->overrides.find(name) != impl_->overrides.end();
+}
+
+std::vector<ParamInfo> Node::DeclaredParams() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->declared;
+}
+
+std::vector<std::string> Node::UnusedParamOverrides() const {
+  std::lock_guard lock(impl_->mutex);
+  std::vector<std::string> unused;
+  for (const auto& [name, entry] : impl_->overrides) {
+    if (!entry.used) unused.push_back(name);
+  }
+  return unused;
+}
+
+std::string Node::ResolveTopicName(std::string_view name) const {
+  std::string resolved;
+  try {
+    resolved = internal::ExpandTopicName(name, impl_->name, impl_->ns);
+  } catch (const NodeError& e) {
+    impl_->Fail(e.what());
+  }
+  for (const Impl::Remap& remap : impl_->remaps) {
+    if (remap.from == resolved) {
+      resolved = remap.to;
+      break;
+    }
+  }
+  try {
+    bus::ValidateTopicName(resolved);
+  } catch (const bus::BusError& e) {
+    impl_->Fail(e.what());
+  }
+  return resolved;
+}
+
+void Node::ThrowMissingCapacity(std::string_view topic, std::string_view type) const {
+  impl_->Fail("publisher of " + std::string(type) + " on '" + std::string(topic) +
+              "' needs options.max_message_bytes (the type has a variable payload)");
+}
+
+void Node::LogCreation(std::string_view what, const std::string& topic,
+                       std::string_view type) const {
+  if (LogEnabled(LogLevel::kDebug)) {
+    Log(LogLevel::kDebug, std::string(what) + " on " + topic + " [" + std::string(type) + "]");
+  }
+}
+
+LogLevel Node::log_level() const { return static_cast<LogLevel>(impl_->log_level.load()); }
+void Node::set_log_level(LogLevel level) { impl_->log_level = static_cast<int>(level); }
+
+void Node::Log(LogLevel level, std::string_view message) const {
+  if (!LogEnabled(level)) return;
+  std::string line;
+  line.reserve(message.size() + impl_->fqn.size() + 16);
+  line += '[';
+  line += LogLevelName(level);
+  line += "] [";
+  line += impl_->fqn;
+  line += "] ";
+  line += message;
+  line += '\n';
+  std::lock_guard lock(LogMutex());
+  WriteAll(STDERR_FILENO, line);
+}
+
+LogStream::LogStream(const Node& node, LogLevel level) : node_(node), level_(level) {
+  if (node.LogEnabled(level)) stream_ = std::make_unique<std::ostringstream>();
+}
+
+LogStream::~LogStream() {
+  if (stream_) node_.Log(level_, stream_->str());
+}
+
+}  // namespace probeless::node

@@ -1,0 +1,13 @@
+// All probeless message types (see docs/messages.md).
+#pragma once
+
+#include "probeless/msgs/camera_info.h"
+#include "probeless/msgs/face_observation.h"
+#include "probeless/msgs/geometry.h"
+#include "probeless/msgs/geometry_buffer.h"
+#include "probeless/msgs/header.h"
+#include "probeless/msgs/image.h"
+#include "probeless/msgs/layout.h"
+#include "probeless/msgs/pose.h"
+#include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/transfer_buffer.h"

@@ -1,0 +1,88 @@
+// ShLight: incident lighting as RGB spherical-harmonic coefficients.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "probeless/msgs/header.h"
+#include "probeless/msgs/layout.h"
+
+namespace probeless::msgs {
+
+inline constexpr uint32_t kMaxShBands = 5;
+inline constexpr uint32_t kMaxShCoefficients = kMaxShBands * kMaxShBands;  // 25
+
+// Coefficients of `bands` SH bands (degrees 0..bands-1): bands^2.
+constexpr uint32_t ShCoefficientCount(uint32_t bands) { return bands * bands; }
+
+// Index of the basis function of degree l (0..4) and order m (-l..l): l*(l+1)+m.
+constexpr uint32_t ShIndex(uint32_t l, int32_t m) {
+  return static_cast<uint32_t>(static_cast<int32_t>(l * (l + 1)) + m);
+}
+
+// Distant incident lighting around a point, as seen in frame header.frame_id (camera optical frame
+// or a world frame; directions are expressed in it).
+//
+// Convention (docs/messages.md, "Spherical harmonics"): real, orthonormal SH basis Y_lm over the
+// unit sphere, Condon-Shortley phase included (so Y_1,-1 = -sqrt(3/(4 pi)) y and
+// Y_1,1 = -sqrt(3/(4 pi)) x for a unit direction (x, y, z)), coefficient index l*(l+1)+m.
+// Incident radiance from unit direction w (pointing from the lit point towards the light) is
+// L_c(w) = sum_i coefficients[i][c] * Y_i(w), c = 0, 1, 2 for linear R, G, B, in the linear units
+// of the camera's image intensities (1 = a white Lambertian surface of albedo 1 facing a uniform
+// radiance of 1 reads as full scale).
+struct ShLight {
+  Header header;
+  uint32_t bands = 0;      // 1..5; coefficient count bands^2 (1, 4, 9, 16, 25)
+  uint32_t reserved0 = 0;  // zero
+  // coefficients[l*(l+1)+m][c]; entries at or beyond bands^2 are zero.
+  float coefficients[kMaxShCoefficients][3] = {};
+  // Unit direction towards the dominant light (from the scene to the light) in header.frame_id;
+  // (0, 0, 0) if there is no dominant direction (e.g. uniform light).
+  float dominant_direction[3] = {};
+  // Radiance of the dominant light in the same linear units as the coefficients (mean of R, G, B).
+  float intensity = 0;
+  // Confidence of the estimate in [0, 1] (0 = no information, 1 = certain).
+  float confidence = 0;
+
+  static constexpr std::string_view kTypeName = "probeless_msgs/ShLight";
+  static constexpr bool kHasPayload = false;
+  static const uint64_t kLayoutHash;
+  static constexpr std::string LayoutDescription() {
+    layout::LayoutBuilder b(kTypeName);
+    PROBELESS_MSGS_FIELD(b, ShLight, header);
+    PROBELESS_MSGS_FIELD(b, ShLight, bands);
+    PROBELESS_MSGS_FIELD(b, ShLight, reserved0);
+    PROBELESS_MSGS_FIELD(b, ShLight, coefficients);
+    PROBELESS_MSGS_FIELD(b, ShLight, dominant_direction);
+    PROBELESS_MSGS_FIELD(b, ShLight, intensity);
+    PROBELESS_MSGS_FIELD(b, ShLight, confidence);
+    return b.Finish<ShLight>();
+  }
+
+  // bands^2.
+  constexpr uint32_t CoefficientCount() const { return ShCoefficientCount(bands); }
+
+  // Throws MessageError unless 1 <= bands <= 5 and confidence is in [0, 1].
+  void Validate() const {
+    if (bands < 1 || bands > kMaxShBands) {
+      throw MessageError(std::string(kTypeName) + ": bands " + std::to_string(bands) +
+                         " out of range 1..5");
+    }
+    if (!(confidence >= 0 && confidence <= 1)) {
+      throw MessageError(std::string(kTypeName) + ": confidence must be in [0, 1]");
+    }
+  }
+};
+inline constexpr uint64_t ShLight::kLayoutHash = layout::Fnv1a64(ShLight::LayoutDescription());
+
+static_assert(Message<ShLight>);
+static_assert(sizeof(ShLight) == 384 && alignof(ShLight) == 8);
+static_assert(offsetof(ShLight, bands) == 56 && offsetof(ShLight, coefficients) == 64 &&
+              offsetof(ShLight, dominant_direction) == 364 && offsetof(ShLight, intensity) == 376 &&
+              offsetof(ShLight, confidence) == 380);
+static_assert(ShIndex(0, 0) == 0 && ShIndex(1, -1) == 1 && ShIndex(1, 1) == 3 &&
+              ShIndex(2, -2) == 4 && ShIndex(4, 4) == 24);
+
+}  // namespace probeless::msgs
