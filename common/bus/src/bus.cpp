@@ -46,7 +46,7 @@ struct PublisherImpl {
   bool StealOldestQueued() {
     TopicControl* ctrl = topic->ctrl();
     auto mine = [&](const QueueEntry& e) {
-      return e.pub_index == index && e.pub_generation == generation;
+      return !IsTombstone(e) && e.pub_index == index && e.pub_generation == generation;
     };
     int best = -1;
     uint32_t best_count = 0;
@@ -66,13 +66,18 @@ struct PublisherImpl {
     std::optional<QueueEntry> stolen;
     {
       RobustLock lock(&sub.mutex);
+      internal::PopLeadingTombstones(sub);
       for (uint32_t k = 0; k < sub.count; ++k) {
         if (!mine(sub.ring[(sub.head + k) % kMaxQueueDepth])) continue;
-        stolen = sub.ring[(sub.head + k) % kMaxQueueDepth];
-        for (uint32_t j = k; j + 1 < sub.count; ++j) {
-          sub.ring[(sub.head + j) % kMaxQueueDepth] = sub.ring[(sub.head + j + 1) % kMaxQueueDepth];
+        QueueEntry& victim = sub.ring[(sub.head + k) % kMaxQueueDepth];
+        stolen = victim;
+        if (k == 0) {  // the oldest of all: pop it
+          sub.head = (sub.head + 1) % kMaxQueueDepth;
+          sub.count -= 1;
+        } else {
+          victim.slot = kTombstoneSlot;  // no shift: see kTombstoneSlot
         }
-        sub.count -= 1;
+        OrderStores();
         sub.dropped.fetch_add(1, std::memory_order_relaxed);
         Slot(stolen->slot)->refs.fetch_sub(1, std::memory_order_acq_rel);
         break;
@@ -147,6 +152,7 @@ struct SubscriberImpl {
       assert(entry->held_mask & (1u << held_index));
       ref = entry->held[held_index];
       entry->held_mask &= ~(1u << held_index);
+      OrderStores();
       topic->DecRef(ref);
     }
     if (topic->ctrl()->publishers[ref.pub_index].state.load(std::memory_order_acquire) == kZombie) {
@@ -173,6 +179,8 @@ using internal::kActive;
 using internal::kFree;
 using internal::kLoanBit;
 using internal::QueueEntry;
+using internal::IsTombstone;
+using internal::OrderStores;
 using internal::RobustLock;
 using internal::TopicHandle;
 
@@ -444,14 +452,20 @@ uint64_t Publisher::Publish(Loan&& loan) {
       {
         RobustLock lock(&sub.mutex);
         if (sub.state.load(std::memory_order_relaxed) != kActive) continue;
-        header->refs.fetch_add(1, std::memory_order_relaxed);
-        if (sub.count == sub.depth) {  // drop-oldest
-          impl.topic->DecRef(sub.ring[sub.head]);
+        header->refs.fetch_add(1, std::memory_order_acq_rel);  // count first, then insert
+        internal::PopLeadingTombstones(sub);
+        if (sub.count == sub.depth) {                            // drop-oldest
+          const QueueEntry oldest = sub.ring[sub.head];
           sub.head = (sub.head + 1) % kMaxQueueDepth;
           sub.count -= 1;
-          sub.dropped.fetch_add(1, std::memory_order_relaxed);
+          OrderStores();  // out of the ring before its reference is released
+          if (!IsTombstone(oldest)) {
+            impl.topic->DecRef(oldest);
+            sub.dropped.fetch_add(1, std::memory_order_relaxed);
+          }
         }
         sub.ring[(sub.head + sub.count) % kMaxQueueDepth] = ref;
+        OrderStores();
         sub.count += 1;
         sub.received.fetch_add(1, std::memory_order_relaxed);
       }
@@ -562,14 +576,17 @@ Subscriber::Subscriber(std::string_view topic, const TopicType& type,
         auto* h = TopicHandle::Header(*source.mapping);
         for (uint32_t i = 0; i < h->history_count; ++i) {
           const uint32_t slot = h->history_slots[(h->history_head + i) % kMaxHistory];
-          TopicHandle::Slot(*source.mapping, slot)->refs.fetch_add(1, std::memory_order_relaxed);
+          TopicHandle::Slot(*source.mapping, slot)->refs.fetch_add(1, std::memory_order_acq_rel);
           if (e.count == e.depth) {
-            handle.DecRef(e.ring[e.head]);
+            const QueueEntry oldest = e.ring[e.head];
             e.head = (e.head + 1) % kMaxQueueDepth;
             e.count -= 1;
+            OrderStores();
+            handle.DecRef(oldest);
           }
           e.ring[(e.head + e.count) % kMaxQueueDepth] = {source.pub_index, source.generation, slot,
                                                          0};
+          OrderStores();
           e.count += 1;
           e.received.fetch_add(1);
         }
@@ -604,8 +621,11 @@ std::optional<Sample> Subscriber::TryTake() {
       ref = e.ring[e.head];
       e.head = (e.head + 1) % kMaxQueueDepth;
       e.count -= 1;
+      if (IsTombstone(ref)) continue;  // a stolen or purged entry: nothing to hand out
+      OrderStores();  // out of the ring before it enters the held table (see kTombstoneSlot)
       held_index = static_cast<uint32_t>(std::countr_one(e.held_mask));
       e.held[held_index] = ref;
+      OrderStores();
       e.held_mask |= 1u << held_index;
     }
     auto mapping = impl.topic->PublisherMapping(ref.pub_index, ref.pub_generation);
@@ -652,7 +672,7 @@ uint64_t Subscriber::dropped() const { return impl_->entry->dropped.load(); }
 
 uint32_t Subscriber::queued() const {
   RobustLock lock(&impl_->entry->mutex);
-  return impl_->entry->count;
+  return internal::LiveCount(*impl_->entry);
 }
 
 uint32_t Subscriber::PublisherCount() const {

@@ -73,7 +73,7 @@ std::vector<TopicSnapshot> ListTopics(const std::string& domain) {
       {
         internal::RobustLock sub_lock(&s.mutex);
         ss.queue_depth = s.depth;
-        ss.queued = s.count;
+        ss.queued = internal::LiveCount(s);
       }
       ss.received = s.received.load();
       ss.dropped = s.dropped.load();

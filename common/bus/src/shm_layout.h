@@ -57,6 +57,21 @@ struct QueueEntry {
   uint32_t reserved;
 };
 
+// A queue entry removed from the middle of a ring (stolen by drop-oldest at the pool, or purged
+// with a zombie publisher) is overwritten with this slot value instead of shifting the ring: a
+// shift would leave a transient duplicate that a process killed mid-shift turns into a double
+// release. Tombstones hold no reference; whoever pops one discards it.
+inline constexpr uint32_t kTombstoneSlot = 0xFFFFFFFFu;
+inline bool IsTombstone(const QueueEntry& e) { return e.slot == kTombstoneSlot; }
+
+// Crash-safety rule for every table that holds slot references (rings, held samples, history):
+// a process may be killed between any two stores, so each mutation is ordered such that a
+// reference is never named by more tables than its count says. Add to the count before inserting;
+// remove from the table (and fence) before releasing the count. A kill then leaks at most one
+// reference, which the owner's audit (Publisher::Borrow when the pool is exhausted) repairs, and
+// never frees a slot that a queue still names.
+inline void OrderStores() { std::atomic_thread_fence(std::memory_order_release); }
+
 struct alignas(64) SubscriberEntry {
   std::atomic<uint32_t> state;  // EntryState; changes only under topic mutex and this mutex
   uint32_t generation;          // +1 every time the entry is freed
@@ -74,6 +89,21 @@ struct alignas(64) SubscriberEntry {
   std::atomic<uint64_t> received;
   std::atomic<uint64_t> dropped;
 };
+
+// Pops tombstones at the head of `sub`'s ring (caller holds sub.mutex): they hold no reference.
+inline void PopLeadingTombstones(SubscriberEntry& sub) {
+  while (sub.count > 0 && IsTombstone(sub.ring[sub.head])) {
+    sub.head = (sub.head + 1) % kMaxQueueDepth;
+    sub.count -= 1;
+  }
+}
+
+// Messages really queued in `sub`'s ring, tombstones excluded (caller holds sub.mutex).
+inline uint32_t LiveCount(const SubscriberEntry& sub) {
+  uint32_t n = 0;
+  for (uint32_t k = 0; k < sub.count; ++k) n += !IsTombstone(sub.ring[(sub.head + k) % kMaxQueueDepth]);
+  return n;
+}
 
 struct alignas(64) PublisherEntry {
   std::atomic<uint32_t> state;       // EntryState; changes only under the topic mutex

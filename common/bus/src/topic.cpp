@@ -143,6 +143,7 @@ std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t 
 }
 
 void TopicHandle::DecRef(const QueueEntry& entry) {
+  if (IsTombstone(entry)) return;
   auto mapping = PublisherMapping(entry.pub_index, entry.pub_generation);
   if (!mapping) return;  // its publisher is gone (purged or reclaimed): nothing to release
   SlotHeader* slot = Slot(*mapping, entry.slot);
@@ -157,7 +158,7 @@ bool TopicHandle::Referenced(uint32_t index, uint32_t generation) {
     RobustLock lock(&sub.mutex);
     for (uint32_t k = 0; k < sub.count; ++k) {
       const QueueEntry& e = sub.ring[(sub.head + k) % kMaxQueueDepth];
-      if (e.pub_index == index && e.pub_generation == generation) return true;
+      if (!IsTombstone(e) && e.pub_index == index && e.pub_generation == generation) return true;
     }
     for (uint32_t i = 0; i < kMaxHeldSamples; ++i) {
       const QueueEntry& e = sub.held[i];
@@ -182,6 +183,7 @@ void TopicHandle::FreeSubscriberLocked(uint32_t index) {
     sub.count = 0;
     sub.head = 0;
     sub.held_mask = 0;
+    OrderStores();  // out of the tables before the references are released
     for (const auto& ref : refs) DecRef(ref);
     sub.state.store(kFree, std::memory_order_release);
     sub.generation += 1;
@@ -240,17 +242,15 @@ void TopicHandle::PurgeZombieLocked(uint32_t index) {
   for (auto& sub : ctrl_->subscribers) {
     if (sub.state.load() != kActive) continue;
     RobustLock lock(&sub.mutex);
-    uint32_t kept = 0;
+    // Tombstones, not compaction: a kill mid-shift would leave duplicates (see kTombstoneSlot).
     for (uint32_t k = 0; k < sub.count; ++k) {
-      const QueueEntry e = sub.ring[(sub.head + k) % kMaxQueueDepth];
-      if (e.pub_index == index && e.pub_generation == entry.generation.load()) {
+      QueueEntry& e = sub.ring[(sub.head + k) % kMaxQueueDepth];
+      if (!IsTombstone(e) && e.pub_index == index &&
+          e.pub_generation == entry.generation.load()) {
+        e.slot = kTombstoneSlot;
         sub.dropped.fetch_add(1, std::memory_order_relaxed);
-        continue;
       }
-      sub.ring[(sub.head + kept) % kMaxQueueDepth] = e;
-      ++kept;
     }
-    sub.count = kept;
   }
   UnlinkSegment(entry.segment);
   unlinked_.push_back(entry.segment);
