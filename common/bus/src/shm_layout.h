@@ -70,7 +70,14 @@ inline bool IsTombstone(const QueueEntry& e) { return e.slot == kTombstoneSlot; 
 // remove from the table (and fence) before releasing the count. A kill then leaks at most one
 // reference, which the owner's audit (Publisher::Borrow when the pool is exhausted) repairs, and
 // never frees a slot that a queue still names.
-inline void OrderStores() { std::atomic_thread_fence(std::memory_order_release); }
+inline void OrderStores() {
+#if defined(__SANITIZE_THREAD__)
+  // TSan models no fences; these stores are all made under a mutex, which it does model.
+  std::atomic_signal_fence(std::memory_order_seq_cst);
+#else
+  std::atomic_thread_fence(std::memory_order_release);
+#endif
+}
 
 struct alignas(64) SubscriberEntry {
   std::atomic<uint32_t> state;  // EntryState; changes only under topic mutex and this mutex

@@ -1,0 +1,53 @@
+// bus_bench: result rows, the readable table, the JSON file and the target checks.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace probeless::bus_bench {
+
+// One result row. Latencies in microseconds; -1 in an optional field means "not measured".
+struct Row {
+  std::string transport;  // probeless | uds | iceoryx
+  std::string scenario;   // 1to1 | 1to3 | slow_subscriber | 4x_rgbd_30fps
+  std::string mode;       // blocking | busy
+  uint64_t size = 0;      // payload bytes
+  uint32_t subscribers = 0;
+  bool write_payload = false;
+  double rate_hz = 0;    // pacing of the latency run
+  uint64_t samples = 0;  // latency samples (all fast subscribers, warm-up excluded)
+  double p50_us = 0, p90_us = 0, p99_us = 0, p999_us = 0, max_us = 0;
+  double msgs_per_s = 0;  // throughput (unpaced run; scenarios: delivered rate)
+  double mb_per_s = 0;
+  uint64_t lost = 0;  // messages a fast subscriber did not get (latency + throughput runs)
+  // Extras.
+  double max_publish_us = -1;  // longest Loan + Publish call in the latency run
+  int64_t loan_failures = 0;
+  int64_t checksum_errors = 0;
+  int64_t stale = 0;
+  int64_t slow_received = -1;         // slow_subscriber: what the slow one got …
+  int64_t slow_lost = -1;             // … and missed (sequence gaps)
+  int64_t slow_transport_drops = -1;  // … as counted by the transport itself (-1: not counted)
+};
+
+// Latency of a bare cross-process hand-over on this machine (no transport), microseconds.
+struct WakeFloor {
+  double futex_p50_us = 0, futex_p99_us = 0;  // waiter blocked in FUTEX_WAIT
+  double spin_p50_us = 0, spin_p99_us = 0;    // waiter spinning
+};
+
+// Percentile (nearest rank) of sorted values; q in (0, 1].
+double Percentile(const std::vector<int64_t>& sorted, double q);
+// Fills p50…max from latency samples in nanoseconds (sorts them).
+void SetLatencies(Row& row, std::vector<int64_t> latencies_ns);
+
+void PrintTableHeader();
+void PrintRow(const Row& row);
+// Writes the rows as a JSON array; returns false with a message on I/O failure.
+bool WriteJson(const std::string& path, const std::vector<Row>& rows, std::string* error);
+// Prints PASS/MISS lines for the targets (and INFO lines putting them in context of the wake-up
+// floor and busy-poll figures); returns the number of MISSes.
+int PrintTargetChecks(const std::vector<Row>& rows, const WakeFloor& floor);
+
+}  // namespace probeless::bus_bench
