@@ -1,6 +1,6 @@
 # Shared build helpers for probeless targets.
 
-add_compile_options(-Wall -Wextra -Wno-unused-parameter)
+add_compile_options(-Wall -Wextra -Wno-unused-parameter -Wno-missing-field-initializers)
 
 if(PROBELESS_SANITIZE)
   add_compile_options(-fsanitize=${PROBELESS_SANITIZE} -fno-omit-frame-pointer -g)

@@ -237,8 +237,18 @@ void ExpectDistinctSelfConsistentHashes() {
 
 TEST(LayoutHashTest, EveryMessageTypeHasADistinctSelfConsistentHash) {
   ExpectDistinctSelfConsistentHashes<Header, Vector3, Quaternion, RigidTransform, Image, CameraInfo,
-                                     Pose, FaceObservation, ShLight, GeometryBuffer,
-                                     TransferBuffer>();
+                                     Pose, FaceObservation, ShLight, GeometryBuffer, TransferBuffer,
+                                     Ack, PlayerControl>();
+}
+
+TEST(ReplayMessagesTest, AckTopicFitsEveryBusTopicName) {
+  static_assert(kTopicNameCapacity > bus::kMaxNameLength);
+  Ack ack;
+  ack.SetTopic(std::string(bus::kMaxNameLength, 'a'));
+  EXPECT_EQ(ack.Topic().size(), bus::kMaxNameLength);
+  EXPECT_THROW(ack.SetTopic(std::string(kTopicNameCapacity, 'a')), MessageError);
+  EXPECT_NE(PlayerControl::LayoutDescription().find("command:PlayerCommand{invalid=0,pause=1"),
+            std::string::npos);
 }
 
 TEST(LayoutHashTest, DescriptionsListEveryField) {

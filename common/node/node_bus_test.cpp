@@ -195,5 +195,43 @@ TEST_F(NodeBusTest, IdleSpinReturnsWithinThePollPeriodOfTheSignal) {
   EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
+// Node::Spin acknowledges every input on "<fqn>/ack" after its handler returned, naming the input's
+// topic, publisher pid and bus sequence (what a lock-step player matches).
+TEST_F(NodeBusTest, SpinAcknowledgesEveryInputAfterItsHandler) {
+  const int status = RunInChild([] {
+    Node node(Argv({"--ros-args", "-r", "__ns:=/lab"}), "worker");
+    if (node.AckTopic() != "/lab/worker/ack") return 40;
+    bus::Subscriber acks("/lab/worker/ack", msgs::TopicTypeOf<msgs::Ack>(), Depth(16));
+    bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
+    bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
+    std::vector<uint64_t> sent;
+    for (int i = 0; i < 3; ++i) {
+      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
+      msgs::WriteMessage<msgs::Pose>(loan.data());
+      sent.push_back(pub.Publish(std::move(loan)));
+    }
+    int handled = 0;
+    bool acked_before_handler_returned = false;
+    node.Spin({{&input, [&](bus::Sample&&) {
+                  ++handled;
+                  acked_before_handler_returned |= acks.queued() >= static_cast<uint32_t>(handled);
+                  if (handled == 3) RequestShutdown();
+                }}});
+    if (handled != 3 || acked_before_handler_returned) return 41;
+    for (uint64_t sequence : sent) {
+      auto sample = acks.Take(1s);
+      if (!sample) return 42;
+      const auto ack = msgs::ReadMessage<msgs::Ack>(sample->data());
+      if (ack->Topic() != "/lab/pose" || ack->publisher_pid != getpid() ||
+          ack->publish_sequence != sequence || ack->header.sequence != sequence) {
+        return 43;
+      }
+    }
+    return 0;
+  });
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
 }  // namespace
 }  // namespace probeless::node

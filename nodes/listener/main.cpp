@@ -56,7 +56,7 @@ int Run(int argc, char** argv) {
     }
     if (count != 0 && received >= count) probeless::node::RequestShutdown();
   };
-  probeless::node::Spin({{&subscriber, on_sample}});
+  node.Spin({{&subscriber, on_sample}});  // acknowledges every image (lock-step replay)
 
   node.Info() << "received " << received << " messages, " << subscriber.dropped() << " dropped, "
               << gaps << " gaps, " << invalid << " invalid";

@@ -14,4 +14,7 @@ int RunTopicCommand(int argc, char** argv);
 // `probeless clean`: removes shared-memory leftovers of dead processes (topic_command.cpp).
 int RunCleanCommand(int argc, char** argv);
 
+// `probeless bag info|record|play|convert`: MCAP logs and dataset sources (bag_command.cpp).
+int RunBagCommand(int argc, char** argv);
+
 }  // namespace probeless::tools

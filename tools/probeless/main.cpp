@@ -19,6 +19,8 @@ constexpr Command kCommands[] = {
      "run a launch file: launch FILE [name:=value ...] [--sigterm-timeout S] [--sigkill-timeout "
      "S]"},
     {"topic", probeless::tools::RunTopicCommand, "inspect topics: topic list|info|hz|bw|echo ..."},
+    {"bag", probeless::tools::RunBagCommand,
+     "MCAP logs and datasets: bag info|record|play|convert ..."},
     {"clean", probeless::tools::RunCleanCommand,
      "remove shared-memory segments left by dead processes"},
 };

@@ -175,12 +175,12 @@ struct SubscriberImpl {
 
 }  // namespace internal
 
+using internal::IsTombstone;
 using internal::kActive;
 using internal::kFree;
 using internal::kLoanBit;
-using internal::QueueEntry;
-using internal::IsTombstone;
 using internal::OrderStores;
+using internal::QueueEntry;
 using internal::RobustLock;
 using internal::TopicHandle;
 
@@ -454,7 +454,7 @@ uint64_t Publisher::Publish(Loan&& loan) {
         if (sub.state.load(std::memory_order_relaxed) != kActive) continue;
         header->refs.fetch_add(1, std::memory_order_acq_rel);  // count first, then insert
         internal::PopLeadingTombstones(sub);
-        if (sub.count == sub.depth) {                            // drop-oldest
+        if (sub.count == sub.depth) {  // drop-oldest
           const QueueEntry oldest = sub.ring[sub.head];
           sub.head = (sub.head + 1) % kMaxQueueDepth;
           sub.count -= 1;

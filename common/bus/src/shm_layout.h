@@ -108,7 +108,8 @@ inline void PopLeadingTombstones(SubscriberEntry& sub) {
 // Messages really queued in `sub`'s ring, tombstones excluded (caller holds sub.mutex).
 inline uint32_t LiveCount(const SubscriberEntry& sub) {
   uint32_t n = 0;
-  for (uint32_t k = 0; k < sub.count; ++k) n += !IsTombstone(sub.ring[(sub.head + k) % kMaxQueueDepth]);
+  for (uint32_t k = 0; k < sub.count; ++k)
+    n += !IsTombstone(sub.ring[(sub.head + k) % kMaxQueueDepth]);
   return n;
 }
 

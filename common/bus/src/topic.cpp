@@ -245,8 +245,7 @@ void TopicHandle::PurgeZombieLocked(uint32_t index) {
     // Tombstones, not compaction: a kill mid-shift would leave duplicates (see kTombstoneSlot).
     for (uint32_t k = 0; k < sub.count; ++k) {
       QueueEntry& e = sub.ring[(sub.head + k) % kMaxQueueDepth];
-      if (!IsTombstone(e) && e.pub_index == index &&
-          e.pub_generation == entry.generation.load()) {
+      if (!IsTombstone(e) && e.pub_index == index && e.pub_generation == entry.generation.load()) {
         e.slot = kTombstoneSlot;
         sub.dropped.fetch_add(1, std::memory_order_relaxed);
       }

@@ -9,10 +9,12 @@
 #include <cstdlib>
 #include <map>
 #include <mutex>
+#include <optional>
 
 #include "arguments.h"
 #include "names.h"
 #include "params.h"
+#include "probeless/msgs/replay.h"
 
 namespace probeless::node {
 
@@ -141,6 +143,9 @@ struct Node::Impl {
   std::map<std::string, Override, std::less<>> overrides;
   std::vector<ParamInfo> declared;
   mutable std::mutex mutex;  // guards overrides and declared
+  std::mutex ack_mutex;      // guards ack_publisher and acks
+  std::optional<bus::Publisher> ack_publisher;
+  uint64_t acks = 0;
   std::atomic<int> log_level{static_cast<int>(LogLevel::kInfo)};
 
   std::string Prefix() const { return "node '" + (fqn.empty() ? name : fqn) + "': "; }
@@ -298,6 +303,42 @@ Node::Node(const std::vector<std::string>& argv, std::string_view default_name)
 }
 
 Node::~Node() = default;
+
+std::string Node::AckTopic() const { return impl_->fqn == "/" ? "/ack" : impl_->fqn + "/ack"; }
+
+void Node::Ack(const bus::Subscriber& from, const bus::MessageInfo& input) {
+  std::lock_guard<std::mutex> lock(impl_->ack_mutex);
+  if (!impl_->ack_publisher) {
+    bus::PublisherOptions options;
+    options.max_message_bytes = sizeof(msgs::Ack);
+    options.slot_count = 16;
+    options.node_name = fully_qualified_name();
+    impl_->ack_publisher.emplace(AckTopic(), msgs::TopicTypeOf<msgs::Ack>(), options);
+  }
+  bus::Loan loan = impl_->ack_publisher->Borrow(sizeof(msgs::Ack));
+  auto ack = msgs::WriteMessage<msgs::Ack>(loan.data());
+  ack->header.StampNow();
+  ack->header.sequence = ++impl_->acks;
+  ack->SetTopic(from.topic());
+  ack->publisher_pid = input.publisher_pid;
+  ack->publish_sequence = input.sequence;
+  impl_->ack_publisher->Publish(std::move(loan));
+}
+
+void Node::Spin(const std::vector<Handler>& handlers) {
+  std::vector<Handler> acking;
+  acking.reserve(handlers.size());
+  for (const Handler& handler : handlers) {
+    bus::Subscriber* subscriber = handler.subscriber;
+    auto on_sample = handler.on_sample;
+    acking.push_back({subscriber, [this, subscriber, on_sample](bus::Sample&& sample) {
+                        const bus::MessageInfo info = sample.info();
+                        on_sample(std::move(sample));
+                        Ack(*subscriber, info);
+                      }});
+  }
+  node::Spin(acking);
+}
 
 const std::string& Node::name() const { return impl_->name; }
 const std::string& Node::namespace_() const { return impl_->ns; }

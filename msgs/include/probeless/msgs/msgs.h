@@ -9,5 +9,6 @@
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/layout.h"
 #include "probeless/msgs/pose.h"
+#include "probeless/msgs/replay.h"
 #include "probeless/msgs/sh_light.h"
 #include "probeless/msgs/transfer_buffer.h"

@@ -220,6 +220,17 @@ class Node {
   LogStream Warn() const { return LogStream(*this, LogLevel::kWarn); }
   LogStream Error() const { return LogStream(*this, LogLevel::kError); }
 
+  // --- Lock-step replay ---
+  // "<fully qualified name>/ack": where this node acknowledges processed inputs.
+  std::string AckTopic() const;
+  // Publishes a msgs::Ack for `input` (a sample taken from `from`) on AckTopic(), so a player in
+  // lock-step mode knows this node has finished with it (docs/replay.md). Spin below calls it after
+  // every handler; a node that finishes its inputs elsewhere (e.g. on a worker thread) calls it
+  // itself. Thread-safe; the publisher is created on first use.
+  void Ack(const bus::Subscriber& from, const bus::MessageInfo& input);
+  // node::Spin(handlers), acknowledging every sample once its handler has returned.
+  void Spin(const std::vector<Handler>& handlers);
+
   // Shortcuts for the process-wide functions above.
   bool ok() const { return node::ok(); }
   bool WaitForShutdown(std::chrono::nanoseconds timeout) const {
