@@ -4,6 +4,7 @@
 // launch file — every frame, in order, identical across runs.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -142,6 +143,61 @@ TEST_F(ReplayIntegrationTest, ConvertInfoAndPlayAFolder) {
   std::vector<int> expected;
   for (int i = 0; i < 12; ++i) expected.push_back(10 * i);
   EXPECT_EQ(values, expected);
+}
+
+// `probeless bag record` (the recorder node) records what `probeless bag play` publishes; the
+// new log replays to the same pixels.
+TEST_F(ReplayIntegrationTest, RecordWhatIsPlayedAndPlayItAgain) {
+  const fs::path folder = WriteImageFolder(10);
+  const fs::path recorded = dir_ / "recorded.mcap";
+  const pid_t recorder = fork();
+  if (recorder == 0) {
+    const std::string probeless = kBin + "/probeless";
+    execl(probeless.c_str(), probeless.c_str(), "bag", "record", "-o", recorded.c_str(),
+          "/camera/image", "/camera/camera_info", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  struct Reaper {  // the recorder never outlives the test, whatever fails
+    pid_t pid;
+    ~Reaper() {
+      if (pid > 0 && kill(pid, SIGKILL) == 0) waitpid(pid, nullptr, 0);
+    }
+  } reaper{recorder};
+  // While it waits for its topics to appear, an idle recorder uses (almost) no CPU.
+  std::this_thread::sleep_for(1s);
+  auto cpu_seconds = [](pid_t pid) {
+    std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+    std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+    std::string field;
+    uint64_t utime = 0;
+    uint64_t stime = 0;
+    for (int i = 3; i <= 15 && fields >> field; ++i) {
+      if (i == 14) utime = std::stoull(field);
+      if (i == 15) stime = std::stoull(field);
+    }
+    return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  };
+  const double idle_cpu = cpu_seconds(recorder);
+  std::this_thread::sleep_for(1s);
+  EXPECT_LT(cpu_seconds(recorder) - idle_cpu, 0.2) << "the idle recorder spins";
+  // The player creates its publishers, then waits 1 s: the recorder discovers the topics (every
+  // 250 ms) and subscribes before the first image.
+  Result r = Run(kBin + "/probeless bag play " + folder.string() +
+                 " --rate 5 --delay 1 --no-keyboard");
+  ASSERT_EQ(r.code, 0) << r.err;
+  std::this_thread::sleep_for(300ms);
+  kill(recorder, SIGINT);
+  int status = 0;
+  waitpid(recorder, &status, 0);
+  reaper.pid = 0;
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  r = Run(kBin + "/probeless bag info " + recorded.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("state:     complete"));
+  EXPECT_THAT(r.out, ::testing::ContainsRegex("/camera/image +10 msgs"));
+  EXPECT_THAT(r.out, ::testing::ContainsRegex("/camera/camera_info +10 msgs"));
 }
 
 TEST_F(ReplayIntegrationTest, BadInputGivesOneLineErrorsAndExitCode2) {

@@ -1,0 +1,268 @@
+// Process test of bin/recorder: records topics published from this test, SIGINT/SIGTERM close the
+// file (footer written, not truncated), the drop report is printed, bad options exit 2 with one
+// line.
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "probeless/bus/bus.h"
+#include "probeless/log/mcap_reader.h"
+#include "probeless/log/ros2.h"
+#include "probeless/msgs/image.h"
+
+extern char** environ;
+
+namespace {
+
+using namespace std::chrono_literals;
+namespace bus = probeless::bus;
+namespace log = probeless::log;
+namespace msgs = probeless::msgs;
+
+[[maybe_unused]] const bool kEnvironmentCleared = (unsetenv("PROBELESS_LOG_LEVEL"), true);
+
+constexpr uint32_t kWidth = 32;
+constexpr uint32_t kHeight = 24;
+
+// A child process whose stdout and stderr go to files.
+class Process {
+ public:
+  Process(const std::string& exe, std::vector<std::string> args) {
+    static int counter = 0;
+    const std::string base =
+        "/tmp/probeless_rec_" + std::to_string(getpid()) + "_" + std::to_string(counter++);
+    out_path_ = base + ".out";
+    err_path_ = base + ".err";
+    args.insert(args.begin(), std::string(PROBELESS_BIN_DIR) + "/" + exe);
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out_path_.c_str(),
+                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err_path_.c_str(),
+                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    const int rc = posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    EXPECT_EQ(rc, 0) << "cannot start " << argv[0];
+  }
+  ~Process() {
+    if (pid_ > 0) {
+      kill(pid_, SIGKILL);
+      Wait();
+    }
+    std::filesystem::remove(out_path_);
+    std::filesystem::remove(err_path_);
+  }
+  void Signal(int signal_number) const { kill(pid_, signal_number); }
+  // Waits for the exit (at most `timeout`, then SIGKILL) and returns the exit code (-1 if killed).
+  int Wait(std::chrono::milliseconds timeout = 20s) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    int status = 0;
+    while (waitpid(pid_, &status, WNOHANG) == 0) {
+      if (std::chrono::steady_clock::now() > deadline) {
+        kill(pid_, SIGKILL);
+        waitpid(pid_, &status, 0);
+        break;
+      }
+      std::this_thread::sleep_for(5ms);
+    }
+    pid_ = -1;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  }
+  std::string Out() const { return Read(out_path_); }
+  std::string Err() const { return Read(err_path_); }
+
+ private:
+  static std::string Read(const std::string& path) {
+    std::ifstream in(path);
+    std::stringstream text;
+    text << in.rdbuf();
+    return text.str();
+  }
+  pid_t pid_ = -1;
+  std::string out_path_;
+  std::string err_path_;
+};
+
+bool WaitFor(const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::sleep_for(2ms);
+  }
+  return true;
+}
+
+bus::Publisher ImagePublisher(const std::string& topic, msgs::Encoding encoding) {
+  bus::PublisherOptions options;
+  options.max_message_bytes = msgs::Image::MessageBytesFor(kWidth, kHeight, encoding);
+  options.slot_count = 80;
+  return bus::Publisher(topic, msgs::TopicTypeOf<msgs::Image>(), options);
+}
+
+void PublishImage(bus::Publisher& publisher, msgs::Encoding encoding, uint64_t index) {
+  bus::Loan loan = publisher.Borrow(msgs::Image::MessageBytesFor(kWidth, kHeight, encoding));
+  auto out = msgs::WriteMessage<msgs::Image>(loan.data());
+  out->header.StampNow();
+  out->header.sequence = index;
+  out->Init(kWidth, kHeight, encoding);
+  for (size_t j = 0; j < out->PayloadBytes(); ++j) {
+    out.payload[j] = static_cast<std::byte>((j + index * 3) & 0xff);
+  }
+  publisher.Publish(std::move(loan));
+}
+
+// Checks that `path` is complete and holds images 1..count on `topic`, byte for byte, in order;
+// returns the total CDR bytes.
+uint64_t ExpectRecorded(const std::string& path, const std::string& topic, uint64_t count) {
+  log::McapReader reader(path);
+  EXPECT_FALSE(reader.truncated()) << reader.recovery().detail;
+  log::ReadOptions select;
+  select.topics = {topic};
+  log::MessageCursor cursor = reader.Messages(select);
+  log::MessageView m;
+  uint64_t n = 0;
+  uint64_t bytes = 0;
+  const log::Ros2Converter& converter = log::Ros2ConverterFor<msgs::Image>();
+  while (cursor.Next(m)) {
+    ++n;
+    bytes += m.data.size();
+    EXPECT_EQ(m.sequence, n);
+    log::MessageBuffer decoded = log::DecodeRos2(converter, m.data);
+    auto in = msgs::ReadMessage<msgs::Image>(decoded.bytes());
+    size_t mismatches = 0;
+    for (size_t j = 0; j < in->PayloadBytes(); ++j) {
+      mismatches += in.payload[j] != static_cast<std::byte>((j + n * 3) & 0xff);
+    }
+    EXPECT_EQ(mismatches, 0u) << topic << " message " << n;
+  }
+  EXPECT_EQ(n, count) << topic;
+  return bytes;
+}
+
+class RecorderNodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    bus::CleanDeadSegments();
+    char pattern[] = "/tmp/probeless_recorder_node_XXXXXX";
+    ASSERT_NE(mkdtemp(pattern), nullptr);
+    dir_ = pattern;
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string dir_;
+};
+
+TEST_F(RecorderNodeTest, CommandLineRecordingStopsCleanlyOnSigintWithReport) {
+  bus::Publisher rgb = ImagePublisher("/rec/image", msgs::Encoding::kRgb8);
+  bus::Publisher depth = ImagePublisher("/rec/depth", msgs::Encoding::kDepth16);
+  bus::Publisher other = ImagePublisher("/other", msgs::Encoding::kMono8);
+  const std::string file = dir_ + "/out.mcap";
+  Process recorder("recorder", {"-o", file, "--compression", "lz4", "/rec/image", "/rec/depth"});
+  ASSERT_TRUE(WaitFor([&] { return rgb.SubscriberCount() == 1 && depth.SubscriberCount() == 1; }))
+      << recorder.Err();
+  for (uint64_t i = 1; i <= 30; ++i) {
+    PublishImage(rgb, msgs::Encoding::kRgb8, i);
+    PublishImage(depth, msgs::Encoding::kDepth16, i);
+    PublishImage(other, msgs::Encoding::kMono8, i);
+  }
+  recorder.Signal(SIGINT);  // what is still queued on the bus is recorded before closing
+  ASSERT_EQ(recorder.Wait(), 0) << recorder.Err();
+  EXPECT_EQ(other.SubscriberCount(), 0u);
+  const uint64_t image_bytes = ExpectRecorded(file, "/rec/image", 30);
+  const uint64_t depth_bytes = ExpectRecorded(file, "/rec/depth", 30);
+  EXPECT_EQ(
+      recorder.Out(),
+      "/rec/depth: received=30 dropped=0 invalid=0 bytes=" + std::to_string(depth_bytes) +
+          "\n/rec/image: received=30 dropped=0 invalid=0 bytes=" + std::to_string(image_bytes) +
+          "\nfile: " + file + "\nsummary: topics=2 received=60 dropped=0 bytes=" +
+          std::to_string(image_bytes + depth_bytes) + " files=1\n");
+  const std::string err = recorder.Err();
+  EXPECT_NE(err.find("[info] [/recorder] recording to " + file + "\n"), std::string::npos) << err;
+  EXPECT_NE(err.find("[info] [/recorder] recording /rec/image (probeless_msgs/Image as "
+                     "sensor_msgs/msg/Image cdr)\n"),
+            std::string::npos)
+      << err;
+}
+
+TEST_F(RecorderNodeTest, ParamsSplitBySizeAndSigterm) {
+  bus::Publisher rgb = ImagePublisher("/p/image", msgs::Encoding::kRgb8);  // 2,304 B of pixels
+  const std::string prefix = dir_ + "/run";
+  Process recorder("recorder", {"--ros-args", "-p", "all:=true", "-p", "output:=" + prefix, "-p",
+                                "split_size_mb:=0.02", "-p", "chunk_size_mb:=0.01", "-p",
+                                "compression:=none", "-p", "queue_depth:=64"});
+  ASSERT_TRUE(WaitFor([&] { return rgb.SubscriberCount() == 1; })) << recorder.Err();
+  for (uint64_t i = 1; i <= 40; ++i) PublishImage(rgb, msgs::Encoding::kRgb8, i);
+  recorder.Signal(SIGTERM);
+  ASSERT_EQ(recorder.Wait(), 0) << recorder.Err();
+  const std::string out = recorder.Out();
+  EXPECT_EQ(out.rfind("/p/image: received=40 dropped=0 invalid=0 bytes=", 0), 0u) << out;
+  // Every file is complete; their union is messages 1..40 in order.
+  uint64_t next = 1;
+  int files = 0;
+  for (;; ++files) {
+    const std::string path = prefix + "_" + std::to_string(files) + ".mcap";
+    if (!std::filesystem::exists(path)) break;
+    EXPECT_NE(out.find("file: " + path + "\n"), std::string::npos) << out;
+    log::McapReader reader(path);
+    EXPECT_FALSE(reader.truncated()) << path;
+    log::MessageCursor cursor = reader.Messages();
+    log::MessageView m;
+    while (cursor.Next(m)) EXPECT_EQ(m.sequence, next++);
+  }
+  EXPECT_GE(files, 3);
+  EXPECT_EQ(next, 41u);
+  EXPECT_NE(out.find(" files=" + std::to_string(files) + "\n"), std::string::npos) << out;
+}
+
+// Runs the recorder with `args`; expects exit 2 and exactly `error` on stderr.
+void ExpectUsageError(std::vector<std::string> args, const std::string& error) {
+  Process recorder("recorder", std::move(args));
+  EXPECT_EQ(recorder.Wait(), 2);
+  EXPECT_EQ(recorder.Err(), "[error] [/recorder] " + error + "\n");
+  EXPECT_EQ(recorder.Out(), "");
+}
+
+TEST_F(RecorderNodeTest, BadOptionsExitTwoWithOneLine) {
+  const std::string out = dir_ + "/x";
+  ExpectUsageError({"-o", out}, "no topics selected (expected topic names, a regex or all)");
+  ExpectUsageError({"-o", out, "--all", "--compression", "brotli"},
+                   "unknown compression 'brotli' (expected none, zstd or lz4)");
+  ExpectUsageError({"-o", out, "--all", "--bogus"}, "unknown option '--bogus' (see --help)");
+  ExpectUsageError({"-o", out, "--all", "--split-size-mb", "big"},
+                   "option --split-size-mb: 'big' is not a number");
+  ExpectUsageError({"-o", out, "--all", "--queue-depth"}, "option --queue-depth needs a value");
+  ExpectUsageError({"-o", out, "--regex", "(a"},
+                   "invalid include regex '(a': Mismatched '(' and ')' in regular expression");
+  ExpectUsageError(
+      {"-o", out, "/bad name"},
+      "node '/recorder': invalid topic name '/bad name' (expected segments of letters, "
+      "digits and '_' not starting with a digit, separated by single '/', optionally "
+      "starting with '/' or '~/')");
+  ExpectUsageError({"--all", "--ros-args", "-p", "queue_depth:=0", "-p", "output:=" + out},
+                   "queue_depth 0 out of range (expected 1..64)");
+  ExpectUsageError({"--all", "-o", dir_ + "/missing/out"},
+                   dir_ + "/missing/out.mcap: cannot create: No such file or directory");
+}
+
+TEST_F(RecorderNodeTest, HelpPrintsUsage) {
+  Process recorder("recorder", {"--help"});
+  EXPECT_EQ(recorder.Wait(), 0);
+  EXPECT_EQ(recorder.Out().rfind("usage: recorder ", 0), 0u) << recorder.Out();
+}
+
+}  // namespace
