@@ -1,0 +1,489 @@
+// face_light on synthetic data: frame helpers, patch sampling, training recovers known RTFs,
+// point selection, the estimator (gray, RGB, invalid samples, outliers, prior, non-negative),
+// ShLight filling, the model file round trip and its error messages.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/estimator.h"
+#include "probeless/face_light/model.h"
+#include "probeless/face_light/training.h"
+#include "probeless/face_light/yaleb.h"
+#include "probeless/msgs/sh_light.h"
+#include "probeless/sh/sh.h"
+
+namespace probeless::face_light {
+namespace {
+
+using Rtf = std::array<double, kRtfCoefficients>;
+
+std::string ErrorOf(const std::function<void()>& action) {
+  try {
+    action();
+  } catch (const FaceLightError& error) {
+    return error.what();
+  }
+  return "(no error)";
+}
+
+double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+// Plausible RTFs: a clamped-cosine lobe around a random normal facing the camera (-z), i.e. the
+// band-0..2 irradiance transfer of a Lambertian point with albedo ~0.6..1 (Ramamoorthi-Hanrahan).
+std::vector<Rtf> SyntheticRtfs(int count, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<Rtf> rtfs(count);
+  for (Rtf& t : rtfs) {
+    const double x = 3.0 * (Uniform(rng) - 0.5), y = 3.0 * (Uniform(rng) - 0.5);
+    const double norm = std::sqrt(x * x + y * y + 1);
+    const sh::Vec3 normal{x / norm, y / norm, -1 / norm};
+    const std::array<double, 9> basis = sh::Basis9(normal);
+    const double albedo = 0.6 + 0.4 * Uniform(rng);
+    for (int n = 0; n < 9; ++n) {
+      t[n] = albedo / std::numbers::pi * sh::ClampedCosineCoefficient(sh::DegreeOf(n)) * basis[n];
+    }
+  }
+  return rtfs;
+}
+
+FaceLightModel ModelFrom(const std::vector<Rtf>& rtfs) {
+  FaceLightModel model;
+  for (size_t i = 0; i < rtfs.size(); ++i) {
+    model.positions.push_back({(i % 20 + 0.5) / 20, (i / 20 + 0.5) / 30});
+    std::array<float, 9> t{};
+    for (int n = 0; n < 9; ++n) t[n] = static_cast<float>(rtfs[i][n]);
+    model.rtf.push_back(t);
+    model.residual_rms.push_back(0.01f);
+  }
+  model.training.subjects = {1, 2};
+  model.training.images = 128;
+  model.training.candidates = static_cast<int>(rtfs.size());
+  return model;
+}
+
+// Synthetic intensities of a model under light E (9 coefficients): rtf . E (eq. 17).
+std::vector<float> Render(const FaceLightModel& model, const std::vector<double>& light) {
+  std::vector<float> out(model.SampleCount());
+  for (int i = 0; i < model.SampleCount(); ++i) {
+    double sum = 0;
+    for (int n = 0; n < 9; ++n) sum += model.rtf[i][n] * light[n];
+    out[i] = static_cast<float>(sum);
+  }
+  return out;
+}
+
+// A band-2 light: directional light of power 2 plus ambient.
+std::vector<double> TestLight(double azimuth_deg, double elevation_deg) {
+  std::vector<double> light =
+      sh::DirectionalLight(YaleBLightDirection(azimuth_deg, elevation_deg), 2.0, 3);
+  light[0] += 0.5;
+  return light;
+}
+
+double AngleDeg(const std::array<float, 3>& a, const std::array<double, 3>& b) {
+  const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+TEST(FaceFrameTest, NormalisedCoordinatesAndSimilarity) {
+  const Point2 uv = NormalisedFromCropPixel(kCanonicalMouth);
+  EXPECT_NEAR(uv.x, 83.5 / 168, 1e-12);
+  const Point2 back = CropPixelFromNormalised(uv);
+  EXPECT_NEAR(back.x, kCanonicalMouth.x, 1e-12);
+  EXPECT_NEAR(back.y, kCanonicalMouth.y, 1e-12);
+  // A live face: scaled by 1.5, rotated by 10 degrees, shifted.
+  SimilarityTransform truth;
+  truth.a = 1.5 * std::cos(0.1745), truth.b = 1.5 * std::sin(0.1745), truth.tx = 200, truth.ty = 80;
+  const std::vector<Point2> canonical = {kCanonicalRightEye, kCanonicalLeftEye, kCanonicalNoseTip,
+                                         kCanonicalMouth};
+  std::vector<Point2> live;
+  for (const Point2& p : canonical) live.push_back(truth.Apply(p));
+  const SimilarityTransform fitted = FitSimilarity(canonical, live);
+  EXPECT_NEAR(fitted.a, truth.a, 1e-9);
+  EXPECT_NEAR(fitted.b, truth.b, 1e-9);
+  EXPECT_NEAR(fitted.tx, truth.tx, 1e-7);
+  EXPECT_NEAR(fitted.ty, truth.ty, 1e-7);
+  EXPECT_NEAR(fitted.Scale(), 1.5, 1e-9);
+  EXPECT_EQ(
+      ErrorOf([&] { FitSimilarity(std::span(canonical).first(1), std::span(live).first(1)); }),
+      "FitSimilarity: need the same number (>= 2) of points, got 1 and 1");
+  const std::vector<Point2> same = {{1, 1}, {1, 1}};
+  EXPECT_EQ(ErrorOf([&] { FitSimilarity(same, same); }),
+            "FitSimilarity: source points are all equal");
+}
+
+TEST(FaceFrameTest, SamplePatchesAveragesBoxesAndFlagsInvalid) {
+  // 168 x 192 gray image with value = x (so a centred box averages to its centre column).
+  std::vector<uint8_t> image(kCropWidth * kCropHeight);
+  for (int y = 0; y < kCropHeight; ++y) {
+    for (int x = 0; x < kCropWidth; ++x) image[y * kCropWidth + x] = static_cast<uint8_t>(x);
+  }
+  image[100 * kCropWidth + 60] = 255;  // one saturated pixel
+  const std::vector<Point2> positions = {NormalisedFromCropPixel({40, 50}),
+                                         NormalisedFromCropPixel({1, 50}),
+                                         NormalisedFromCropPixel({60, 101})};
+  std::vector<float> values(3);
+  std::vector<uint8_t> valid(3);
+  SamplePatches(image.data(), kCropWidth, kCropHeight, kCropWidth, 1, SimilarityTransform{},
+                positions, 2, 255, values, valid);
+  EXPECT_NEAR(values[0], 40 / 255.0, 1e-6);
+  EXPECT_EQ(valid[0], 1);
+  EXPECT_EQ(valid[1], 0);  // leaves the image
+  EXPECT_EQ(valid[2], 0);  // saturated
+  // A transform scaling by 2 doubles the patch radius and moves the samples.
+  std::vector<uint8_t> big(400 * 400);
+  for (int y = 0; y < 400; ++y) {
+    for (int x = 0; x < 400; ++x) big[y * 400 + x] = static_cast<uint8_t>(x / 2);
+  }
+  SimilarityTransform twice;
+  twice.a = 2;
+  SamplePatches(big.data(), 400, 400, 400, 1, twice, std::span(positions).first(1), 2, 256,
+                std::span(values).first(1), std::span(valid).first(1));
+  EXPECT_NEAR(values[0], 40 / 255.0, 0.5 / 255);
+  EXPECT_EQ(ErrorOf([&] {
+              SamplePatches(image.data(), kCropWidth, kCropHeight, kCropWidth, 1,
+                            SimilarityTransform{}, positions, 2, 255, std::span(values).first(2),
+                            valid);
+            }),
+            "SamplePatches: 3 positions need 3 values and 3 flags, got 2 and 3");
+}
+
+TEST(TrainingTest, CandidateGridHas512PointsInsideTheMask) {
+  const std::vector<Point2> candidates = CandidatePositions();
+  EXPECT_EQ(candidates.size(), 512u);
+  for (const Point2& p : candidates) {
+    const Point2 px = CropPixelFromNormalised(p);
+    EXPECT_GE(px.x, 2);
+    EXPECT_LE(px.x, kCropWidth - 3);
+    EXPECT_GE(px.y, 8);
+    EXPECT_LE(px.y, 183);
+    const double ex = (px.x - kCanonicalRightEye.x) / 24,
+                 ey = (px.y - kCanonicalRightEye.y + 4) / 17;
+    EXPECT_GT(ex * ex + ey * ey, 1);
+  }
+  EXPECT_EQ(ErrorOf([] { CandidatePositions(1); }),
+            "CandidatePositions: step_px 1.000000 out of range 2..40");
+}
+
+// Synthetic training set: every person sees every one of 40 light directions; intensity =
+// albedo_f * (T_j . Y(w_k)) for known T_j.
+std::vector<TrainingImage> SyntheticTraining(const std::vector<Rtf>& rtfs, int persons,
+                                             double noise, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<TrainingImage> images;
+  for (int f = 1; f <= persons; ++f) {
+    const double albedo = 0.5 + 0.2 * f;
+    for (int k = 0; k < 40; ++k) {
+      TrainingImage image;
+      image.subject = f;
+      image.azimuth_deg = k == 0 ? 0 : -117 + 6 * k;
+      image.elevation_deg = k == 0 ? 0 : -40 + (k * 37) % 100;
+      const std::array<double, 9> y =
+          sh::Basis9(YaleBLightDirection(image.azimuth_deg, image.elevation_deg));
+      for (const Rtf& t : rtfs) {
+        double sum = 0;
+        for (int n = 0; n < 9; ++n) sum += t[n] * y[n];
+        image.values.push_back(static_cast<float>(albedo * sum + noise * (Uniform(rng) - 0.5)));
+        image.valid.push_back(1);
+      }
+      images.push_back(std::move(image));
+    }
+  }
+  return images;
+}
+
+TEST(TrainingTest, FitRecoversKnownRtfsUpToTheAlbedoNormalisation) {
+  const std::vector<Rtf> rtfs = SyntheticRtfs(101, 7);
+  std::vector<TrainingImage> images = SyntheticTraining(rtfs, 3, 0.0, 1);
+  // Per-person albedo (sec. 3.4.2) = albedo_f * median_j(T_j . Y(front)); after dividing, every
+  // person's data is T_j / m with m = median_j(T_j . Y(front)).
+  const std::array<double, 9> front = sh::Basis9(YaleBLightDirection(0, 0));
+  std::vector<double> frontal;
+  for (const Rtf& t : rtfs) {
+    double sum = 0;
+    for (int n = 0; n < 9; ++n) sum += t[n] * front[n];
+    frontal.push_back(sum);
+  }
+  std::sort(frontal.begin(), frontal.end());
+  const double m = frontal[50];
+  EXPECT_NEAR(PersonAlbedo(images, 2), 0.9 * m, 1e-6);
+  // An invalid value is simply left out of its candidate's system.
+  images[5].valid[3] = 0;
+  images[5].values[3] = 1e6f;
+  std::vector<float> residuals;
+  const std::vector<Rtf> fitted = FitRtfs(images, &residuals);
+  ASSERT_EQ(fitted.size(), rtfs.size());
+  for (size_t j = 0; j < rtfs.size(); ++j) {
+    for (int n = 0; n < 9; ++n) EXPECT_NEAR(fitted[j][n], rtfs[j][n] / m, 2e-5) << j << "," << n;
+    EXPECT_LT(residuals[j], 1e-5);
+  }
+}
+
+TEST(TrainingTest, SelectionKeepsCandidatesAboveThePercentile) {
+  std::vector<Rtf> rtfs(100);
+  for (int j = 0; j < 100; ++j) rtfs[j].fill(0), rtfs[j][j % 9] = j;  // coefficient j % 9 grows
+  double applied = 0;
+  TrainingOptions options;
+  options.percentile = 90;
+  const std::vector<int> selected = SelectSamples(rtfs, options, &applied);
+  // Per coefficient, only the top 10% of the 100 ranks (>= 90) pass: the 10 largest j overall
+  // that are largest in their coefficient n (the other coefficients are 0 and rank low but tie).
+  EXPECT_EQ(applied, 90);
+  EXPECT_FALSE(selected.empty());
+  EXPECT_TRUE(std::is_sorted(selected.begin(), selected.end()));
+  EXPECT_TRUE(std::find(selected.begin(), selected.end(), 99) != selected.end());
+  options.points = 7;
+  const std::vector<int> seven = SelectSamples(rtfs, options, &applied);
+  // Ties (91..99 each rank first in their coefficient) keep the lower index first.
+  EXPECT_EQ(seven, (std::vector<int>{91, 92, 93, 94, 95, 96, 97}));
+  EXPECT_EQ(applied, 99);
+}
+
+TEST(TrainingTest, TrainPacksTheModelAndRejectsBadInput) {
+  const std::vector<Rtf> rtfs = SyntheticRtfs(60, 3);
+  const std::vector<TrainingImage> images = SyntheticTraining(rtfs, 2, 0.001, 2);
+  std::vector<Point2> candidates;
+  for (int j = 0; j < 60; ++j) candidates.push_back({(j + 0.5) / 60, 0.5});
+  TrainingOptions options;
+  options.points = 30;
+  std::vector<double> progress;
+  const FaceLightModel model =
+      Train(candidates, images, options, [&](double f) { progress.push_back(f); });
+  EXPECT_EQ(model.SampleCount(), 30);
+  EXPECT_EQ(model.training.subjects, (std::vector<int>{1, 2}));
+  EXPECT_EQ(model.training.images, 80);
+  EXPECT_EQ(model.training.candidates, 60);
+  EXPECT_EQ(progress.back(), 1.0);
+  std::vector<TrainingImage> no_front(images.begin() + 1, images.begin() + 40);
+  EXPECT_EQ(ErrorOf([&] { FitRtfs(no_front, nullptr); }),
+            "face_light training: subject 1 has no frontal-lit image (azimuth 0, elevation 0)");
+  std::vector<TrainingImage> few(images.begin(), images.begin() + 5);
+  EXPECT_EQ(ErrorOf([&] { FitRtfs(few, nullptr); }),
+            "face_light training: candidate 0 has 5 valid equations and no unique RTF (need 9 "
+            "independent lights)");
+  EXPECT_EQ(ErrorOf([&] { Train(std::span(candidates).first(10), images, options); }),
+            "face_light training: images have 60 values but there are 10 candidates");
+}
+
+TEST(EstimatorTest, GrayRecoversAKnownLightExactly) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 11));
+  const FaceLightEstimator estimator(model);
+  for (const auto& [azimuth, elevation] :
+       std::vector<std::pair<double, double>>{{0, 0}, {50, -20}, {-95, 10}, {130, 20}, {-35, 65}}) {
+    const std::vector<double> light = TestLight(azimuth, elevation);
+    const LightEstimate estimate = estimator.EstimateGray(Render(model, light));
+    ASSERT_EQ(estimate.channels, 1);
+    for (int n = 0; n < 9; ++n) {
+      EXPECT_NEAR(estimate.coefficients[n][0], light[n], 2e-3 * (1 + std::abs(light[n])));
+      EXPECT_EQ(estimate.coefficients[n][1], estimate.coefficients[n][0]);
+    }
+    EXPECT_LT(AngleDeg(estimate.dominant_direction, YaleBLightDirection(azimuth, elevation)), 0.1);
+    EXPECT_NEAR(estimate.intensity, 2.0, 0.01);
+    EXPECT_EQ(estimate.samples_used, 294);
+    EXPECT_GT(estimate.confidence, 0.99);
+  }
+}
+
+TEST(EstimatorTest, RgbWithInvalidSamplesUsesTheFastDowndate) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 12));
+  const FaceLightEstimator estimator(model);
+  std::vector<std::vector<double>> lights = {TestLight(20, 10), TestLight(-60, -20),
+                                             TestLight(85, 20)};
+  lights[1][0] *= 0.5;
+  std::vector<float> rgb(3 * 294);
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float> channel = Render(model, lights[c]);
+    for (int i = 0; i < 294; ++i) rgb[3 * i + c] = channel[i];
+  }
+  std::vector<uint64_t> valid(8, ~uint64_t{0});
+  for (int i = 0; i < 294; i += 7) {  // 42 invalid samples, their values garbage
+    valid[i / 64] &= ~(uint64_t{1} << (i % 64));
+    rgb[3 * i] = 1e9f;
+  }
+  const LightEstimate estimate = estimator.EstimateRgb(rgb, valid);
+  ASSERT_EQ(estimate.channels, 3);
+  EXPECT_EQ(estimate.samples_used, 252);
+  for (int c = 0; c < 3; ++c) {
+    for (int n = 0; n < 9; ++n) {
+      EXPECT_NEAR(estimate.coefficients[n][c], lights[c][n], 3e-3 * (1 + std::abs(lights[c][n])))
+          << "c=" << c << " n=" << n;
+    }
+  }
+  EXPECT_NEAR(estimate.confidence, 252.0 / 294, 0.01);
+  // NaN counts as invalid too; fewer than 9 usable samples give no estimate.
+  std::vector<float> gray = Render(model, lights[0]);
+  gray[0] = std::nanf("");
+  EXPECT_EQ(estimator.EstimateGray(gray).samples_used, 293);
+  std::vector<uint64_t> few(8, 0);
+  few[0] = 0xff;
+  EXPECT_EQ(estimator.EstimateGray(gray, few).channels, 0);
+  EXPECT_EQ(ErrorOf([&] { estimator.EstimateGray(std::span(gray).first(10)); }),
+            "FaceLightEstimator: 10 intensities, the model has 294 samples");
+  EXPECT_EQ(ErrorOf([&] { estimator.EstimateRgb(gray); }),
+            "FaceLightEstimator: 294 RGB values, expected 3 x 294 samples");
+  EXPECT_EQ(ErrorOf([&] { estimator.EstimateGray(gray, std::span(valid).first(2)); }),
+            "FaceLightEstimator: 2 validity words cover fewer than 294 samples");
+}
+
+TEST(EstimatorTest, RobustModeRejectsOutliers) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 13));
+  const std::vector<double> light = TestLight(-50, 15);
+  std::vector<float> values = Render(model, light);
+  std::mt19937_64 rng(5);
+  for (float& v : values) v += static_cast<float>(0.002 * (Uniform(rng) - 0.5));
+  for (int i = 3; i < 294; i += 10) values[i] += 0.8f;  // 30 specular highlights
+  for (int i = 6; i < 294; i += 25) values[i] = 0;      // 12 cast shadows
+  const LightEstimate plain = FaceLightEstimator(model).EstimateGray(values);
+  EstimatorOptions options;
+  options.robust = true;
+  const LightEstimate robust = FaceLightEstimator(model, options).EstimateGray(values);
+  const std::array<double, 3> truth = YaleBLightDirection(-50, 15);
+  EXPECT_GT(AngleDeg(plain.dominant_direction, truth), 2.0);
+  EXPECT_LT(AngleDeg(robust.dominant_direction, truth), 0.5);
+  EXPECT_GE(robust.samples_rejected, 42);
+  EXPECT_LE(robust.samples_rejected, 50);
+  for (int n = 0; n < 9; ++n) EXPECT_NEAR(robust.coefficients[n][0], light[n], 0.02);
+}
+
+TEST(EstimatorTest, PriorAndNonNegativeModes) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 14));
+  const std::vector<double> light = sh::DirectionalLight(YaleBLightDirection(30, 20), 2.0, 3);
+  const std::vector<float> values = Render(model, light);
+  // A small ridge barely moves the direction.
+  EstimatorOptions ridge;
+  ridge.ridge = 0.001;
+  ridge.back_prior = 0.001;
+  const LightEstimate with_prior = FaceLightEstimator(model, ridge).EstimateGray(values);
+  EXPECT_LT(AngleDeg(with_prior.dominant_direction, YaleBLightDirection(30, 20)), 3.0);
+  // Non-negative: the light is a non-negative sum of directional lights, so its band-2 radiance
+  // is a non-negative combination; a directional light is reproduced closely.
+  EstimatorOptions nn;
+  nn.non_negative = true;
+  nn.nn_directions = 256;
+
+  const LightEstimate positive = FaceLightEstimator(model, nn).EstimateGray(values);
+  EXPECT_LT(AngleDeg(positive.dominant_direction, YaleBLightDirection(30, 20)), 3.0);
+  EXPECT_LT(positive.rms_residual, 1e-3);
+  EXPECT_NEAR(positive.coefficients[0][0], light[0], 0.1 * light[0]);
+  EXPECT_EQ(ErrorOf([&] {
+              EstimatorOptions bad;
+              bad.ridge = -1;
+              FaceLightEstimator(model, bad);
+            }),
+            "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor >= 0; "
+            "robust_iterations 1..20; robust_threshold > 0; nn_directions 9..1024; "
+            "nn_iterations 1..10000)");
+}
+
+TEST(EstimatorTest, FillShLightCopiesTheEstimate) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(100, 15));
+  const LightEstimate estimate =
+      FaceLightEstimator(model).EstimateGray(Render(model, TestLight(10, 10)));
+  msgs::ShLight light;
+  FillShLight(estimate, light);
+  EXPECT_EQ(light.bands, 3u);
+  EXPECT_EQ(light.coefficients[4][2], estimate.coefficients[4][2]);
+  EXPECT_EQ(light.coefficients[9][0], 0.0f);
+  EXPECT_EQ(light.dominant_direction[1], estimate.dominant_direction[1]);
+  EXPECT_EQ(light.confidence, estimate.confidence);
+  EXPECT_NO_THROW(light.Validate());
+}
+
+class ModelFileTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ =
+        std::filesystem::temp_directory_path() / ("face_light_test_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::filesystem::path dir_;
+};
+
+TEST_F(ModelFileTest, RoundTripIsExact) {
+  FaceLightModel model = ModelFrom(SyntheticRtfs(50, 16));
+  model.training.percentile = 87.5;
+  model.patch_radius_px = 3;
+  model.intensity_exponent = 0.5;
+  const std::string path = (dir_ / "m.model").string();
+  SaveModel(model, path);
+  const FaceLightModel loaded = LoadModel(path);
+  EXPECT_EQ(SerializeModel(loaded), SerializeModel(model));
+  ASSERT_EQ(loaded.SampleCount(), 50);
+  for (int i = 0; i < 50; ++i) {
+    EXPECT_EQ(loaded.rtf[i], model.rtf[i]);
+    EXPECT_EQ(loaded.positions[i].x, model.positions[i].x);
+  }
+  EXPECT_EQ(loaded.patch_radius_px, 3);
+  EXPECT_EQ(loaded.intensity_exponent, 0.5);
+  EXPECT_EQ(loaded.training.subjects, model.training.subjects);
+  EXPECT_EQ(loaded.training.percentile, 87.5);
+}
+
+TEST_F(ModelFileTest, CorruptFilesGiveOneLineErrors) {
+  const std::string good = SerializeModel(ModelFrom(SyntheticRtfs(3, 17)));
+  const auto replace = [&](const std::string& from, const std::string& to) {
+    std::string text = good;
+    text.replace(text.find(from), from.size(), to);
+    return text;
+  };
+  const auto error = [](const std::string& text) {
+    return ErrorOf([&] { ParseModel(text, "m.model"); });
+  };
+  EXPECT_EQ(error("hello\n"),
+            "m.model: line 1: not a face_light model (expected magic "
+            "'probeless_face_light_model')");
+  EXPECT_EQ(error(""),
+            "m.model: line 1: unexpected end of file, expected the magic line "
+            "(truncated?)");
+  EXPECT_EQ(error(replace("probeless_face_light_model 1", "probeless_face_light_model 2")),
+            "m.model: line 1: unsupported version 2 (expected 1)");
+  EXPECT_EQ(error(replace("condon-shortley", "no-phase")),
+            "m.model: line 3: SH convention 'real-orthonormal;no-phase;index=l(l+1)+m' differs "
+            "from 'real-orthonormal;condon-shortley;index=l(l+1)+m'");
+  EXPECT_EQ(error(replace("samples 3", "samples 4")),
+            "m.model: line 19: expected 'sample', found 'end'");
+  EXPECT_EQ(error(good.substr(0, good.rfind("sample "))),
+            "m.model: line 18: unexpected end of file, expected 'sample' (truncated?)");
+  EXPECT_EQ(error(replace("samples 3", "samples 600")),
+            "m.model: line 14: samples 600 out of range 1..512");
+  EXPECT_EQ(error(replace("sample 0.025", "sample nan")),
+            "m.model: line 16: bad u 'nan' (expected a finite number)");
+  EXPECT_EQ(error(replace("intensity_exponent 1", "intensity_exponent 3")),
+            "m.model: line 8: intensity_exponent must be in (0, 2]");
+  EXPECT_EQ(error(replace("training_images 128", "training_images many")),
+            "m.model: line 11: bad training_images 'many' (expected an integer)");
+  EXPECT_EQ(error(replace("end\n", "")),
+            "m.model: line 19: unexpected end of file, expected 'end' (truncated?)");
+  EXPECT_EQ(ErrorOf([&] { LoadModel((dir_ / "missing.model").string()); }),
+            (dir_ / "missing.model").string() + ": cannot open model file");
+}
+
+TEST(YaleBNameTest, ParsesFileNamesAndSubjectLists) {
+  const auto name = ParseYaleBName("yaleB07_P00A-035E+65.pgm");
+  ASSERT_TRUE(name.has_value());
+  EXPECT_EQ(name->subject, 7);
+  EXPECT_EQ(name->azimuth_deg, -35);
+  EXPECT_EQ(name->elevation_deg, 65);
+  EXPECT_FALSE(ParseYaleBName("yaleB07_P00_Ambient.pgm").has_value());
+  EXPECT_FALSE(ParseYaleBName("yaleB07_P00A-035E+65.pgm.bad").has_value());
+  // Positive azimuth: light from the subject's right = image left = -x.
+  EXPECT_NEAR(YaleBLightDirection(90, 0)[0], -1, 1e-12);
+  EXPECT_EQ(ParseSubjectList("1-3,7,2"), (std::vector<int>{1, 2, 3, 7}));
+  EXPECT_EQ(ErrorOf([] { ParseSubjectList("1-x"); }),
+            "bad subject list '1-x' (expected e.g. 1-28 or 1,3,5-7 with numbers 1..99)");
+  EXPECT_EQ(ErrorOf([] { ListYaleBSubjects("/nonexistent/yaleb"); }),
+            "/nonexistent/yaleb: not a directory (expected the Yale B folder with yaleBxx/)");
+}
+
+}  // namespace
+}  // namespace probeless::face_light

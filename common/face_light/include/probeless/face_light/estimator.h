@@ -1,0 +1,114 @@
+// Online light estimation from face samples (Knorr & Kurz 2014, sec. 3.5, eq. 19) with optional
+// extensions beyond the paper: Tikhonov prior, robust sample rejection, non-negative light.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "probeless/face_light/model.h"
+
+namespace probeless::msgs {
+struct ShLight;
+}
+
+namespace probeless::face_light {
+
+struct EstimatorOptions {
+  // Tikhonov prior added to the normal equations of eq. 19, each scaled by the mean diagonal of
+  // T^T T (so the weights are dimensionless): ridge * I (shrinks all 9 coefficients) plus
+  // back_prior * B, B_ab = integral over the back hemisphere (z > 0, behind the head) of Y_a Y_b
+  // (penalises light the face cannot see). 0 = the paper's plain least squares.
+  double ridge = 0;
+  double back_prior = 0;
+  // Robust rejection: after each solve, samples whose residual (mean over channels) exceeds
+  // robust_threshold * 1.4826 * median |residual| are dropped and the light re-solved, up to
+  // robust_iterations times or until the rejected set stops changing.
+  bool robust = false;
+  int robust_iterations = 4;
+  double robust_threshold = 2.5;
+  // Non-negative light: the final solve is over lights that are sums of non-negative directional
+  // lights from nn_directions Fibonacci directions (E = B c, c >= 0; Lawson-Hanson active-set
+  // NNLS, at most nn_iterations outer iterations), instead of unconstrained SH coefficients.
+  bool non_negative = false;
+  int nn_directions = 96;
+  int nn_iterations = 100;
+  // Weight sample i by 1 / (residual_rms[i]^2 + weight_floor^2) (its training fit quality)
+  // instead of 1; 0 = unweighted (the paper).
+  double weight_floor = 0;
+};
+
+// One estimated light in the light frame (model.h). Units: albedo-normalised image intensity per
+// unit power, i.e. a directional light of power 1 from the front makes the median frontal sample
+// of the face read its albedo factor; divide the input intensities by the face's albedo to get
+// albedo-free light (or leave them: the light is then scaled by the face's albedo).
+struct LightEstimate {
+  int channels = 0;  // 1 (gray) or 3 (RGB); 0 = no estimate (too few valid samples)
+  // coefficients[n][c], n = l(l+1)+m (bands 0..2), c = R, G, B; gray copies into all three.
+  std::array<std::array<float, 3>, kRtfCoefficients> coefficients{};
+  // Sloan's optimal linear direction of the channel-mean light (unit, towards the light), or
+  // (0, 0, 0) if band 1 vanishes.
+  std::array<float, 3> dominant_direction{};
+  // Power of the best-fitting directional light along dominant_direction (bands 1..2, channel
+  // mean; sh::DirectionalPower).
+  float intensity = 0;
+  // [0, 1]: (samples used / samples in the model) * max(0, R^2 of the fit).
+  float confidence = 0;
+  int samples_used = 0;      // valid and not rejected
+  int samples_rejected = 0;  // valid but dropped by the robust rejection
+  float rms_residual = 0;    // RMS residual of the used samples (channel mean)
+};
+
+// Estimates lights from the samples of one model. Construction precomputes the pseudo-inverse for
+// the full valid set and the prior matrices; Estimate* are const, allocation-free and thread-safe.
+class FaceLightEstimator {
+ public:
+  // Throws FaceLightError if the model is invalid or options are out of range (negative weights,
+  // robust_iterations outside 1..20, robust_threshold <= 0, nn_directions outside 9..1024,
+  // nn_iterations outside 1..10000).
+  explicit FaceLightEstimator(const FaceLightModel& model, EstimatorOptions options = {});
+
+  int SampleCount() const { return sample_count_; }
+  const EstimatorOptions& Options() const { return options_; }
+
+  // Gray estimate from intensities[i] of model sample i (linear, same units as training: the
+  // patch mean / 255, optionally divided by the face's albedo). valid_bits: bit (i % 64) of word
+  // i / 64 set = sample i valid (msgs::FaceObservation::sample_valid layout); empty = all valid.
+  // Inputs are raised to the model's intensity_exponent first. Non-finite intensities count as
+  // invalid. Returns channels = 0 if fewer than 9 samples are
+  // usable. Throws FaceLightError if intensities.size() != SampleCount() or valid_bits is neither
+  // empty nor covers SampleCount() bits.
+  LightEstimate EstimateGray(std::span<const float> intensities,
+                             std::span<const uint64_t> valid_bits = {}) const;
+  // RGB estimate, one light per channel from rgb[3 i + c] (interleaved R, G, B, e.g.
+  // msgs::FaceObservation::sample_rgb); robust rejection uses the channel-mean residual so all
+  // channels share one sample set. Same errors with rgb.size() != 3 * SampleCount().
+  LightEstimate EstimateRgb(std::span<const float> rgb,
+                            std::span<const uint64_t> valid_bits = {}) const;
+
+ private:
+  LightEstimate Estimate(const float* values, int channels,
+                         std::span<const uint64_t> valid_bits) const;
+  // Non-negative light minimising 1/2 E^T g E - rhs^T E (g: 9 x 9 normal matrix); false if the
+  // passive-set system is singular.
+  bool SolveNonNegative(const double* g, const double* rhs, double* light) const;
+
+  EstimatorOptions options_;
+  int sample_count_ = 0;
+  double exponent_ = 1;              // model's intensity_exponent, applied to the inputs
+  std::vector<float> rtf_;           // [i * 9 + n]
+  int stride_ = 0;                   // sample count rounded up to a multiple of 8
+  std::vector<float> rtf_t_;         // [n * stride_ + i] (transposed, zero padded)
+  std::vector<float> pinv_;          // [n * stride_ + i], (T^T W T + R)^-1 T^T W (full set), padded
+  std::vector<float> weights_;       // per-sample weight (1 or training-residual based)
+  std::array<double, 81> normal_{};  // T^T W T + R (full valid set)
+  std::array<double, 81> prior_{};   // R
+  std::vector<double> nn_basis_;     // [k * 9 + n] = Y_n(d_k)
+};
+
+// Writes an estimate into an msgs::ShLight (bands = 3, coefficients, dominant_direction,
+// intensity, confidence); the header is left to the caller.
+void FillShLight(const LightEstimate& estimate, msgs::ShLight& out);
+
+}  // namespace probeless::face_light

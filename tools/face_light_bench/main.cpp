@@ -1,0 +1,143 @@
+// face_light_bench: nanoseconds per light estimate for a model (default: the shipped model) over
+// deterministic synthetic frames (fixed seed), per estimator mode; median of repeated batches.
+//
+//   face_light_bench [--model MODEL] [--frames N] [--json FILE]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/estimator.h"
+#include "probeless/face_light/model.h"
+
+namespace fl = probeless::face_light;
+
+namespace {
+
+struct Case {
+  std::string name;
+  fl::EstimatorOptions options;
+  bool rgb = false;
+  int invalid_every = 0;  // every k-th sample invalid (0 = all valid)
+};
+
+int Run(int argc, char** argv) {
+  std::string model_path = std::string(PROBELESS_DEFAULT_MODEL);
+  std::string json_path;
+  int frames = 2000;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "-h" || flag == "--help") {
+      std::cout << "usage: face_light_bench [--model MODEL] [--frames N] [--json FILE]\n";
+      return 0;
+    }
+    if (i + 1 >= argc) {
+      std::cerr << "face_light_bench: " << flag << " needs a value (or is unknown)\n";
+      return 2;
+    }
+    const std::string value = argv[++i];
+    if (flag == "--model") {
+      model_path = value;
+    } else if (flag == "--frames") {
+      frames = std::max(1, std::atoi(value.c_str()));
+    } else if (flag == "--json") {
+      json_path = value;
+    } else {
+      std::cerr << "face_light_bench: unknown option " << flag << "\n";
+      return 2;
+    }
+  }
+  const fl::FaceLightModel model = fl::LoadModel(model_path);
+  const int n = model.SampleCount();
+  // Synthetic frames: a random light rendered through the RTFs plus noise, as linear intensities.
+  std::mt19937_64 rng(12345);
+  const auto uniform = [&]() { return static_cast<double>(rng() >> 11) * 0x1.0p-53; };
+  std::vector<std::vector<float>> rgb_frames(64, std::vector<float>(3 * n));
+  for (auto& frame : rgb_frames) {
+    double light[3][9];
+    for (auto& channel : light) {
+      for (double& c : channel) c = uniform() - 0.5;
+      channel[0] += 1.5;
+    }
+    for (int i = 0; i < n; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        double value = 0;
+        for (int k = 0; k < 9; ++k) value += model.rtf[i][k] * light[c][k];
+        value = std::max(0.0, value) + 0.01 * uniform();
+        frame[3 * i + c] = static_cast<float>(value * value);  // back to linear for g = 0.5
+      }
+    }
+  }
+  std::vector<std::vector<float>> gray_frames(64, std::vector<float>(n));
+  for (size_t f = 0; f < gray_frames.size(); ++f) {
+    for (int i = 0; i < n; ++i) gray_frames[f][i] = rgb_frames[f][3 * i + 1];
+  }
+  std::vector<Case> cases;
+  cases.push_back({"gray", {}, false, 0});
+  cases.push_back({"rgb", {}, true, 0});
+  cases.push_back({"rgb_10pct_invalid", {}, true, 10});
+  fl::EstimatorOptions prior;
+  prior.back_prior = 0.1;
+  cases.push_back({"rgb_back_prior", prior, true, 0});
+  fl::EstimatorOptions robust = prior;
+  robust.robust = true;
+  cases.push_back({"rgb_robust", robust, true, 0});
+  fl::EstimatorOptions nn = prior;
+  nn.non_negative = true;
+  cases.push_back({"rgb_non_negative", nn, true, 0});
+
+  std::string json = "{\n  \"model\": \"" + model_path +
+                     "\",\n  \"samples\": " + std::to_string(n) +
+                     ",\n  \"frames\": " + std::to_string(frames) + ",\n  \"ns_per_estimate\": {";
+  std::printf("face_light_bench: %d samples, %d frames per case (median of 7 batches)\n", n,
+              frames);
+  volatile float sink = 0;
+  for (size_t k = 0; k < cases.size(); ++k) {
+    const Case& c = cases[k];
+    const fl::FaceLightEstimator estimator(model, c.options);
+    std::vector<uint64_t> bits(8, ~uint64_t{0});
+    if (c.invalid_every > 0) {
+      for (int i = 0; i < n; i += c.invalid_every) bits[i / 64] &= ~(uint64_t{1} << (i % 64));
+    }
+    std::vector<double> batches;
+    for (int batch = 0; batch < 7; ++batch) {
+      const auto start = std::chrono::steady_clock::now();
+      for (int f = 0; f < frames; ++f) {
+        const fl::LightEstimate e = c.rgb ? estimator.EstimateRgb(rgb_frames[f % 64], bits)
+                                          : estimator.EstimateGray(gray_frames[f % 64], bits);
+        sink = sink + e.coefficients[0][0];
+      }
+      const auto stop = std::chrono::steady_clock::now();
+      batches.push_back(std::chrono::duration<double, std::nano>(stop - start).count() / frames);
+    }
+    std::sort(batches.begin(), batches.end());
+    const double ns = batches[batches.size() / 2];
+    std::printf("  %-20s %9.0f ns/estimate (%.2f us)\n", c.name.c_str(), ns, ns / 1000);
+    char entry[96];
+    std::snprintf(entry, sizeof entry, "%s\n    \"%s\": %.0f", k ? "," : "", c.name.c_str(), ns);
+    json += entry;
+  }
+  json += "\n  }\n}\n";
+  if (!json_path.empty()) {
+    std::ofstream out(json_path);
+    out << json;
+    if (!out) throw fl::FaceLightError(json_path + ": cannot write");
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "face_light_bench: %s\n", error.what());
+    return 1;
+  }
+}

@@ -1,0 +1,379 @@
+// face_light_eval: estimates the light of every Extended Yale B light image of subjects a model was
+// not trained on and compares the optimal linear direction with the file name's azimuth and
+// elevation (Knorr & Kurz 2014, sec. 5.1). Writes JSON figures and optional PNG plots.
+//
+//   face_light_eval --model MODEL --yaleb DIR [--subjects LIST] [--landmarks aligned] --json OUT
+//                   [--plots DIR] [--ridge X] [--back-prior X] [--robust] [--robust-threshold X]
+//                   [--non-negative] [--weight-floor X]
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <numbers>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/estimator.h"
+#include "probeless/face_light/model.h"
+#include "probeless/face_light/yaleb.h"
+#include "probeless/sh/sh.h"
+
+namespace fl = probeless::face_light;
+namespace sh = probeless::sh;
+
+namespace {
+
+constexpr double kDeg = 180 / std::numbers::pi;
+
+constexpr const char* kUsage =
+    "usage: face_light_eval --model MODEL --yaleb DIR [--subjects LIST] [--landmarks aligned]\n"
+    "                       --json OUT [--plots DIR] [estimator options]\n"
+    "  --subjects LIST       test subjects (default: every subject in DIR the model was not\n"
+    "                        trained on); a training subject is an error\n"
+    "  --landmarks aligned   sample positions from the aligned crop (the only mode: the Yale B\n"
+    "                        crops are aligned to the canonical frame)\n"
+    "  --plots DIR           write azimuth/elevation scatter plots and lat-long maps (PNG)\n"
+    "  estimator options: --ridge X --back-prior X --robust --robust-threshold X\n"
+    "                     --non-negative --weight-floor X (docs/face_light.md)\n";
+
+struct Result {
+  int subject = 0;
+  double true_azimuth = 0, true_elevation = 0;  // degrees
+  double azimuth = 0, elevation = 0;            // estimated, degrees
+  double angular_error = 0;                     // degrees
+  double microseconds = 0;
+};
+
+double ParseNumber(const std::string& flag, const std::string& text) {
+  char* end = nullptr;
+  const double value = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0') {
+    throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
+  }
+  return value;
+}
+
+double Mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0 : sum / v.size();
+}
+
+double Std(const std::vector<double>& v) {
+  const double mean = Mean(v);
+  double sum = 0;
+  for (double x : v) sum += (x - mean) * (x - mean);
+  return v.size() < 2 ? 0 : std::sqrt(sum / (v.size() - 1));
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
+}
+
+// Scatter plot of estimated vs true angles (paper fig. 6): x = true, y = estimated, both over
+// [-range, range] degrees, with the diagonal.
+void ScatterPlot(const std::string& path, const std::string& title,
+                 const std::vector<std::pair<double, double>>& points, double range) {
+  constexpr int kSize = 480, kMargin = 50;
+  cv::Mat image(kSize + 2 * kMargin, kSize + 2 * kMargin, CV_8UC3, cv::Scalar(255, 255, 255));
+  const auto to_pixel = [&](double x, double y) {
+    return cv::Point(static_cast<int>(kMargin + (x + range) / (2 * range) * kSize),
+                     static_cast<int>(kMargin + (range - y) / (2 * range) * kSize));
+  };
+  for (double t = -range; t <= range + 1e-9; t += range / 4) {
+    cv::line(image, to_pixel(t, -range), to_pixel(t, range), cv::Scalar(225, 225, 225));
+    cv::line(image, to_pixel(-range, t), to_pixel(range, t), cv::Scalar(225, 225, 225));
+    char label[16];
+    std::snprintf(label, sizeof label, "%.0f", t);
+    cv::putText(image, label, to_pixel(t, -range) + cv::Point(-12, 18), cv::FONT_HERSHEY_PLAIN, 0.9,
+                cv::Scalar(0, 0, 0));
+    cv::putText(image, label, to_pixel(-range, t) + cv::Point(-42, 4), cv::FONT_HERSHEY_PLAIN, 0.9,
+                cv::Scalar(0, 0, 0));
+  }
+  cv::rectangle(image, to_pixel(-range, range), to_pixel(range, -range), cv::Scalar(0, 0, 0));
+  cv::line(image, to_pixel(-range, -range), to_pixel(range, range), cv::Scalar(0, 160, 0));
+  for (const auto& [x, y] : points) {
+    cv::circle(image, to_pixel(x, std::clamp(y, -range, range)), 2, cv::Scalar(200, 60, 0),
+               cv::FILLED);
+  }
+  cv::putText(image, title, cv::Point(kMargin, 30), cv::FONT_HERSHEY_SIMPLEX, 0.6,
+              cv::Scalar(0, 0, 0));
+  cv::putText(image, "true (deg)", cv::Point(kMargin + kSize / 2 - 40, kSize + 2 * kMargin - 8),
+              cv::FONT_HERSHEY_PLAIN, 1.0, cv::Scalar(0, 0, 0));
+  if (!cv::imwrite(path, image)) throw fl::FaceLightError(path + ": cannot write PNG");
+}
+
+// Diverging colour (blue < 0 < red) of value / scale.
+cv::Vec3b Diverging(double t) {
+  t = std::clamp(t, -1.0, 1.0);
+  const auto channel = [](double x) { return static_cast<uint8_t>(std::clamp(x, 0.0, 255.0)); };
+  if (t >= 0) return {channel(255 * (1 - t)), channel(255 * (1 - t)), 255};
+  return {255, channel(255 * (1 + t)), channel(255 * (1 + t))};
+}
+
+cv::Mat LatLongPanel(const std::array<double, 9>& light, double scale, int width, int height) {
+  std::vector<float> coefficients(light.begin(), light.end());
+  std::vector<float> values(static_cast<size_t>(width) * height);
+  sh::RenderLatLong(coefficients, 3, 1, width, height, values);
+  cv::Mat panel(height, width, CV_8UC3);
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u)
+      panel.at<cv::Vec3b>(v, u) = Diverging(values[v * width + u] / scale);
+  }
+  return panel;
+}
+
+// One picture per image: the face with its samples, then lat-long truth (the directional light's
+// band-2 projection scaled to the estimate's intensity), estimate and difference, on one colour
+// scale; crosses mark the true (green) and estimated (black) directions.
+void LatLongFigure(const std::string& path, const fl::YaleBImage& face,
+                   const fl::FaceLightModel& model, const fl::LightEstimate& estimate,
+                   const Result& result) {
+  constexpr int kW = 256, kH = 128;
+  std::array<double, 9> estimated{}, truth{}, difference{};
+  for (int n = 0; n < 9; ++n) estimated[n] = estimate.coefficients[n][0];
+  const std::vector<double> directional =
+      sh::DirectionalLight(fl::YaleBLightDirection(result.true_azimuth, result.true_elevation),
+                           std::max(estimate.intensity, 1e-6f), 3);
+  double scale = 1e-9;
+  for (int n = 0; n < 9; ++n) {
+    truth[n] = directional[n];
+    difference[n] = estimated[n] - truth[n];
+  }
+  for (const auto& light : {estimated, truth}) {
+    std::vector<float> c(light.begin(), light.end()), values(kW * kH);
+    sh::RenderLatLong(c, 3, 1, kW, kH, values);
+    for (float x : values) scale = std::max(scale, static_cast<double>(std::abs(x)));
+  }
+  cv::Mat face_image(face.height, face.width, CV_8UC1, const_cast<uint8_t*>(face.pixels.data()));
+  cv::Mat face_colour;
+  cv::cvtColor(face_image, face_colour, cv::COLOR_GRAY2BGR);
+  for (const fl::Point2& p : model.positions) {
+    const fl::Point2 px = fl::CropPixelFromNormalised(p);
+    face_colour.at<cv::Vec3b>(static_cast<int>(std::lround(px.y)),
+                              static_cast<int>(std::lround(px.x))) = cv::Vec3b(0, 200, 255);
+  }
+  cv::Mat face_small;
+  cv::resize(face_colour, face_small, cv::Size(kH * face.width / face.height, kH));
+  cv::Mat canvas(kH + 24, face_small.cols + 3 * (kW + 8) + 8, CV_8UC3, cv::Scalar(255, 255, 255));
+  face_small.copyTo(canvas(cv::Rect(0, 24, face_small.cols, kH)));
+  const char* titles[3] = {"truth (band 2)", "estimate", "estimate - truth"};
+  const std::array<double, 9>* lights[3] = {&truth, &estimated, &difference};
+  for (int k = 0; k < 3; ++k) {
+    const int x0 = face_small.cols + 8 + k * (kW + 8);
+    LatLongPanel(*lights[k], scale, kW, kH).copyTo(canvas(cv::Rect(x0, 24, kW, kH)));
+    cv::putText(canvas, titles[k], cv::Point(x0, 17), cv::FONT_HERSHEY_PLAIN, 1.0,
+                cv::Scalar(0, 0, 0));
+    const auto mark = [&](double azimuth, double elevation, cv::Scalar colour) {
+      const int u = static_cast<int>((180 - azimuth) / 360 * kW);
+      const int v = static_cast<int>((90 - elevation) / 180 * kH);
+      cv::drawMarker(canvas, cv::Point(x0 + u, 24 + v), colour, cv::MARKER_CROSS, 10, 2);
+    };
+    mark(result.true_azimuth, result.true_elevation, cv::Scalar(0, 160, 0));
+    mark(result.azimuth, result.elevation, cv::Scalar(0, 0, 0));
+  }
+  if (!cv::imwrite(path, canvas)) throw fl::FaceLightError(path + ": cannot write PNG");
+}
+
+int Run(int argc, char** argv) {
+  std::string model_path, yaleb, subjects_text, json_path, plots, landmarks = "aligned";
+  fl::EstimatorOptions options;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "-h" || flag == "--help") {
+      std::cout << kUsage;
+      return 0;
+    }
+    if (flag == "--robust") {
+      options.robust = true;
+      continue;
+    }
+    if (flag == "--non-negative") {
+      options.non_negative = true;
+      continue;
+    }
+    if (i + 1 >= argc) {
+      std::cerr << "face_light_eval: " << flag << " needs a value (or is unknown)\n" << kUsage;
+      return 2;
+    }
+    const std::string value = argv[++i];
+    if (flag == "--model") {
+      model_path = value;
+    } else if (flag == "--yaleb") {
+      yaleb = value;
+    } else if (flag == "--subjects") {
+      subjects_text = value;
+    } else if (flag == "--landmarks") {
+      landmarks = value;
+    } else if (flag == "--json") {
+      json_path = value;
+    } else if (flag == "--plots") {
+      plots = value;
+    } else if (flag == "--ridge") {
+      options.ridge = ParseNumber(flag, value);
+    } else if (flag == "--back-prior") {
+      options.back_prior = ParseNumber(flag, value);
+    } else if (flag == "--robust-threshold") {
+      options.robust_threshold = ParseNumber(flag, value);
+    } else if (flag == "--weight-floor") {
+      options.weight_floor = ParseNumber(flag, value);
+    } else {
+      std::cerr << "face_light_eval: unknown option " << flag << "\n" << kUsage;
+      return 2;
+    }
+  }
+  if (model_path.empty() || yaleb.empty() || json_path.empty()) {
+    std::cerr << "face_light_eval: --model, --yaleb and --json are required\n" << kUsage;
+    return 2;
+  }
+  if (landmarks != "aligned") {
+    throw fl::FaceLightError("--landmarks '" + landmarks +
+                             "' is not supported (only 'aligned': the Yale B crops are aligned)");
+  }
+  const fl::FaceLightModel model = fl::LoadModel(model_path);
+  const fl::FaceLightEstimator estimator(model, options);
+  const std::vector<int>& trained = model.training.subjects;
+  const std::vector<int> available = fl::ListYaleBSubjects(yaleb);
+  std::vector<int> subjects;
+  if (subjects_text.empty()) {
+    for (int s : available) {
+      if (std::find(trained.begin(), trained.end(), s) == trained.end()) subjects.push_back(s);
+    }
+  } else {
+    for (int s : fl::ParseSubjectList(subjects_text)) {
+      if (std::find(trained.begin(), trained.end(), s) != trained.end()) {
+        throw fl::FaceLightError("subject " + std::to_string(s) +
+                                 " was used to train the model; evaluate on unseen subjects only");
+      }
+      if (std::find(available.begin(), available.end(), s) != available.end()) {
+        subjects.push_back(s);
+      } else {
+        std::cerr << "face_light_eval: note: subject " << s << " is not in " << yaleb
+                  << ", skipped\n";
+      }
+    }
+  }
+  if (subjects.empty())
+    throw fl::FaceLightError("no test subject left (all were used in training)");
+  if (!plots.empty()) std::filesystem::create_directories(plots);
+
+  std::vector<Result> results;
+  std::vector<float> values(model.SampleCount());
+  std::vector<uint8_t> valid(model.SampleCount());
+  std::vector<uint64_t> valid_bits((model.SampleCount() + 63) / 64);
+  int figures = 0;
+  for (int subject : subjects) {
+    for (const fl::YaleBImage& image : fl::LoadYaleBSubject(yaleb, subject)) {
+      fl::SamplePatches(image.pixels.data(), image.width, image.height, image.width, 1,
+                        fl::SimilarityTransform{}, model.positions, model.patch_radius_px, 255,
+                        values, valid);
+      std::fill(valid_bits.begin(), valid_bits.end(), 0);
+      for (int i = 0; i < model.SampleCount(); ++i) {
+        if (valid[i]) valid_bits[i / 64] |= uint64_t{1} << (i % 64);
+      }
+      const auto start = std::chrono::steady_clock::now();
+      const fl::LightEstimate estimate = estimator.EstimateGray(values, valid_bits);
+      const auto stop = std::chrono::steady_clock::now();
+      Result r;
+      r.subject = subject;
+      r.true_azimuth = image.name.azimuth_deg;
+      r.true_elevation = image.name.elevation_deg;
+      r.microseconds = std::chrono::duration<double, std::micro>(stop - start).count();
+      const sh::Vec3 d{estimate.dominant_direction[0], estimate.dominant_direction[1],
+                       estimate.dominant_direction[2]};
+      const std::array<double, 3> t = fl::YaleBLightDirection(r.true_azimuth, r.true_elevation);
+      if (estimate.channels == 0 || d == sh::Vec3{0, 0, 0}) {
+        r.angular_error = 180;  // no estimate counts as the worst error
+      } else {
+        const std::array<double, 2> ae = sh::AzimuthElevation(d);
+        r.azimuth = ae[0] * kDeg;
+        r.elevation = ae[1] * kDeg;
+        const double dot = d[0] * t[0] + d[1] * t[1] + d[2] * t[2];
+        r.angular_error = std::acos(std::clamp(dot, -1.0, 1.0)) * kDeg;
+      }
+      results.push_back(r);
+      // A few lat-long figures: the first subject, a spread of light directions.
+      if (!plots.empty() && subject == subjects.front() &&
+          ((r.true_elevation == 0 && (r.true_azimuth == 0 || std::abs(r.true_azimuth) == 50 ||
+                                      std::abs(r.true_azimuth) == 95)) ||
+           (r.true_azimuth == 35 && r.true_elevation == 65) ||
+           (r.true_azimuth == -110 && r.true_elevation == -20))) {
+        char name[96];
+        std::snprintf(name, sizeof name, "%s/latlong_yaleB%02d_A%+04dE%+03d.png", plots.c_str(),
+                      subject, static_cast<int>(r.true_azimuth),
+                      static_cast<int>(r.true_elevation));
+        LatLongFigure(name, image, model, estimate, r);
+        ++figures;
+      }
+    }
+  }
+
+  std::vector<double> angular, azimuth, elevation, micros, angular_75;
+  for (const Result& r : results) {
+    angular.push_back(r.angular_error);
+    double da = std::fmod(r.azimuth - r.true_azimuth + 540.0, 360.0) - 180.0;
+    azimuth.push_back(std::abs(da));
+    elevation.push_back(std::abs(r.elevation - r.true_elevation));
+    micros.push_back(r.microseconds);
+    if (r.angular_error <= 75) angular_75.push_back(r.angular_error);
+  }
+  std::ofstream json(json_path);
+  if (!json) throw fl::FaceLightError(json_path + ": cannot open for writing");
+  char buffer[2048];
+  std::string subject_list;
+  for (int s : subjects) subject_list += (subject_list.empty() ? "" : ", ") + std::to_string(s);
+  std::string trained_list;
+  for (int s : trained) trained_list += (trained_list.empty() ? "" : ", ") + std::to_string(s);
+  std::snprintf(
+      buffer, sizeof buffer,
+      "{\n  \"model\": \"%s\",\n  \"samples\": %d,\n  \"training_subjects\": [%s],\n"
+      "  \"test_subjects\": [%s],\n  \"options\": {\"ridge\": %g, \"back_prior\": %g, "
+      "\"robust\": %s, \"robust_threshold\": %g, \"non_negative\": %s, \"weight_floor\": %g},\n"
+      "  \"images\": %zu,\n  \"angular_mean_deg\": %.3f,\n  \"angular_median_deg\": %.3f,\n"
+      "  \"angular_std_deg\": %.3f,\n  \"angular_mean_deg_below_75\": %.3f,\n"
+      "  \"fraction_above_75\": %.4f,\n  \"azimuth_mae_deg\": %.3f,\n  \"azimuth_std_deg\": %.3f,\n"
+      "  \"elevation_mae_deg\": %.3f,\n  \"elevation_std_deg\": %.3f,\n"
+      "  \"estimate_us_median\": %.3f\n}\n",
+      model_path.c_str(), model.SampleCount(), trained_list.c_str(), subject_list.c_str(),
+      options.ridge, options.back_prior, options.robust ? "true" : "false",
+      options.robust_threshold, options.non_negative ? "true" : "false", options.weight_floor,
+      results.size(), Mean(angular), Median(angular), Std(angular), Mean(angular_75),
+      1.0 - static_cast<double>(angular_75.size()) / std::max<size_t>(results.size(), 1),
+      Mean(azimuth), Std(azimuth), Mean(elevation), Std(elevation), Median(micros));
+  json << buffer;
+  json.close();
+  if (!json) throw fl::FaceLightError(json_path + ": write failed");
+  std::cout << buffer;
+
+  if (!plots.empty()) {
+    std::vector<std::pair<double, double>> az, el;
+    for (const Result& r : results) {
+      az.emplace_back(r.true_azimuth, r.azimuth);
+      el.emplace_back(r.true_elevation, r.elevation);
+    }
+    ScatterPlot(plots + "/azimuth.png", "azimuth: estimated vs true (deg)", az, 180);
+    ScatterPlot(plots + "/elevation.png", "elevation: estimated vs true (deg)", el, 90);
+    std::cerr << "face_light_eval: wrote " << figures + 2 << " PNG files to " << plots << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "face_light_eval: %s\n", error.what());
+    return 1;
+  }
+}

@@ -1,0 +1,149 @@
+// rtf_train: trains the Knorr & Kurz (2014) radiance transfer functions on Extended Yale B crops
+// and writes a face_light model file (docs/face_light.md).
+//
+//   rtf_train --yaleb DIR [--subjects LIST] [--points N] [--percentile P] [--patch-radius R]
+//             [--intensity-exponent G] [--grid-step PX] --out MODEL
+//
+// Progress goes to stderr; errors are one line on stderr and exit code 1 (2 for usage errors).
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/model.h"
+#include "probeless/face_light/training.h"
+#include "probeless/face_light/yaleb.h"
+
+namespace fl = probeless::face_light;
+
+namespace {
+
+constexpr const char* kUsage =
+    "usage: rtf_train --yaleb DIR [--subjects LIST] [--points N] [--percentile P]\n"
+    "                 [--patch-radius R] [--intensity-exponent G] [--grid-step PX] --out MODEL\n"
+    "  --yaleb DIR        Extended Yale B cropped folder (yaleBxx/ sub-folders)\n"
+    "  --subjects LIST    training subjects, e.g. 1-28 or 1,3,5-7 (default: all in DIR)\n"
+    "  --points N         keep exactly N samples (default: use --percentile)\n"
+    "  --percentile P     keep candidates above the P-th percentile of |RTF coefficient| for\n"
+    "                     at least one coefficient (default 90, Knorr & Kurz sec. 6)\n"
+    "  --patch-radius R   box patch half size in crop pixels (default 2: 5x5)\n"
+    "  --intensity-exponent G  response exponent of the RTF fit (default 0.5; 1 = the paper)\n"
+    "  --grid-step PX     candidate grid step in crop pixels (default 6.42: 512 candidates)\n"
+    "  --out MODEL        model file to write\n";
+
+void Progress(const std::string& label, double fraction) {
+  constexpr int kWidth = 40;
+  const int filled = static_cast<int>(fraction * kWidth + 0.5);
+  std::fprintf(stderr, "\r%-28s [%s%s] %3d%%", label.c_str(), std::string(filled, '#').c_str(),
+               std::string(kWidth - filled, '.').c_str(), static_cast<int>(fraction * 100 + 0.5));
+  if (fraction >= 1) std::fputc('\n', stderr);
+  std::fflush(stderr);
+}
+
+double ParseNumber(const std::string& flag, const std::string& text) {
+  char* end = nullptr;
+  const double value = std::strtod(text.c_str(), &end);
+  if (text.empty() || *end != '\0') {
+    throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
+  }
+  return value;
+}
+
+int Run(int argc, char** argv) {
+  std::string yaleb, out, subjects_text;
+  fl::TrainingOptions options;
+  options.intensity_exponent = 0.5;
+  double grid_step = 6.42;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "-h" || flag == "--help") {
+      std::cout << kUsage;
+      return 0;
+    }
+    if (i + 1 >= argc) {
+      std::cerr << "rtf_train: " << flag << " needs a value (or is unknown)\n" << kUsage;
+      return 2;
+    }
+    const std::string value = argv[++i];
+    if (flag == "--yaleb") {
+      yaleb = value;
+    } else if (flag == "--subjects") {
+      subjects_text = value;
+    } else if (flag == "--points") {
+      options.points = static_cast<int>(ParseNumber(flag, value));
+    } else if (flag == "--percentile") {
+      options.percentile = ParseNumber(flag, value);
+    } else if (flag == "--patch-radius") {
+      options.patch_radius_px = static_cast<int>(ParseNumber(flag, value));
+    } else if (flag == "--intensity-exponent") {
+      options.intensity_exponent = ParseNumber(flag, value);
+    } else if (flag == "--grid-step") {
+      grid_step = ParseNumber(flag, value);
+    } else if (flag == "--out") {
+      out = value;
+    } else {
+      std::cerr << "rtf_train: unknown option " << flag << "\n" << kUsage;
+      return 2;
+    }
+  }
+  if (yaleb.empty() || out.empty()) {
+    std::cerr << "rtf_train: --yaleb and --out are required\n" << kUsage;
+    return 2;
+  }
+  const std::vector<int> available = fl::ListYaleBSubjects(yaleb);
+  std::vector<int> subjects;
+  if (subjects_text.empty()) {
+    subjects = available;
+  } else {
+    for (int s : fl::ParseSubjectList(subjects_text)) {
+      if (std::find(available.begin(), available.end(), s) != available.end()) {
+        subjects.push_back(s);
+      } else {
+        std::cerr << "rtf_train: note: subject " << s << " is not in " << yaleb << ", skipped\n";
+      }
+    }
+  }
+  if (subjects.empty()) throw fl::FaceLightError(yaleb + ": no training subject found");
+
+  const std::vector<fl::Point2> candidates = fl::CandidatePositions(grid_step);
+  std::vector<fl::TrainingImage> images;
+  for (size_t s = 0; s < subjects.size(); ++s) {
+    Progress("loading subjects", static_cast<double>(s) / subjects.size());
+    for (const fl::YaleBImage& image : fl::LoadYaleBSubject(yaleb, subjects[s])) {
+      fl::TrainingImage sample;
+      sample.subject = image.name.subject;
+      sample.azimuth_deg = image.name.azimuth_deg;
+      sample.elevation_deg = image.name.elevation_deg;
+      sample.values.resize(candidates.size());
+      sample.valid.resize(candidates.size());
+      fl::SamplePatches(image.pixels.data(), image.width, image.height, image.width, 1,
+                        fl::SimilarityTransform{}, candidates, options.patch_radius_px, 255,
+                        sample.values, sample.valid);
+      images.push_back(std::move(sample));
+    }
+  }
+  Progress("loading subjects", 1.0);
+  const fl::FaceLightModel model = fl::Train(candidates, images, options, [](double fraction) {
+    Progress("fitting RTFs (eq. 18)", fraction);
+  });
+  fl::SaveModel(model, out);
+  std::fprintf(stderr,
+               "rtf_train: %d subjects, %d images, %d candidates -> %d samples (percentile %.2f), "
+               "wrote %s\n",
+               static_cast<int>(model.training.subjects.size()), model.training.images,
+               model.training.candidates, model.SampleCount(), model.training.percentile,
+               out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& error) {
+    std::fprintf(stderr, "\nrtf_train: %s\n", error.what());
+    return 1;
+  }
+}
