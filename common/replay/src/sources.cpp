@@ -9,6 +9,7 @@
 #include "probeless/log/mcap_reader.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/header.h"
+#include "probeless/sim/simulator.h"
 
 namespace probeless::replay {
 namespace {
@@ -140,6 +141,13 @@ std::unique_ptr<dataset::Source> OpenSource(const std::string& spec,
                                             const dataset::DatasetOptions& options) {
   if (spec.starts_with("mcap:")) return OpenMcapSource(spec.substr(5));
   if (EndsWith(spec, ".mcap")) return OpenMcapSource(spec);
+  if (spec.starts_with("sim:") || EndsWith(spec, ".yaml") || EndsWith(spec, ".yml")) {
+    sim::SimOptions sim_options;
+    sim_options.max_frames = options.max_frames;
+    sim_options.topic_prefix = options.topic_prefix;
+    sim_options.ground_truth_prefix = options.ground_truth_prefix;
+    return sim::OpenSimSource(spec.starts_with("sim:") ? spec.substr(4) : spec, sim_options);
+  }
   return dataset::OpenDataset(spec, options);
 }
 

@@ -46,7 +46,7 @@ struct StreamMessage {
 class Source {
  public:
   virtual ~Source() = default;
-  // "mcap", "7scenes", "tum", "yaleb", "images" or "video".
+  // "mcap", "sim", "7scenes", "tum", "yaleb", "images" or "video".
   virtual std::string_view kind() const = 0;
   // The path the source was opened from.
   virtual const std::string& path() const = 0;

@@ -26,9 +26,10 @@ std::unique_ptr<dataset::Source> OpenMcapSource(const std::string& path);
 // "topic (schema name)" of the channels an MCAP Source skipped; empty for other sources.
 std::vector<std::string> SkippedMcapChannels(const dataset::Source& source);
 
-// Opens `spec`: "mcap:PATH" or a PATH ending in ".mcap" as an MCAP log, anything else through
-// dataset::OpenDataset ("kind:PATH" or a folder/file whose kind is detected). Throws
-// dataset::DatasetError.
+// Opens `spec`: "mcap:PATH" or a PATH ending in ".mcap" as an MCAP log; "sim:PATH" or a PATH
+// ending in ".yaml"/".yml" as a simulator scenario (sim::OpenSimSource; max_frames and the topic
+// prefixes of `options` apply); anything else through dataset::OpenDataset ("kind:PATH" or a
+// folder/file whose kind is detected). Throws dataset::DatasetError (sim::ScenarioError is one).
 std::unique_ptr<dataset::Source> OpenSource(const std::string& spec,
                                             const dataset::DatasetOptions& options = {});
 

@@ -1,0 +1,175 @@
+// A ray-traceable scene: meshes placed in a world frame with materials, lights and an environment,
+// plus batched ray queries (closest hit and occlusion) on a thread pool, backed by Embree 3.
+//
+// Radiometry (the units of msgs::ShLight): linear RGB where 1 is full scale; a Lambertian surface
+// of albedo a receiving irradiance E reflects radiance a E / pi, so a white surface lit by a
+// uniform environment of radiance 1 reads 1.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "probeless/raytrace/geometry.h"
+#include "probeless/raytrace/mesh.h"
+
+namespace probeless::raytrace {
+
+class ThreadPool;
+
+// A linear-RGB image used as albedo texture or lat-long environment. Pixel (x, y) at
+// linear_rgb[(y * width + x) * 3 + c].
+struct Texture {
+  int width = 0;
+  int height = 0;
+  std::vector<float> linear_rgb;
+
+  // Bilinear lookup with wrap-around at (u, v), u right, v up (OBJ convention), in [0, 1).
+  Vec3 Sample(float u, float v) const;
+};
+// Reads an 8-bit PNG/JPEG (sRGB, converted to linear) or a 32-bit float image. Throws
+// RaytraceError "cannot read texture '<path>'..." on failure.
+Texture LoadTexture(const std::string& path);
+
+// Surface reflectance: Lambertian albedo (texture, else vertex colours, else `albedo`, each
+// multiplied by `albedo_scale`) plus an optional Blinn-Phong lobe for direct lights.
+struct Material {
+  Vec3 albedo{0.8f, 0.8f, 0.8f};  // linear RGB in [0, 1]
+  float albedo_scale = 1;
+  std::shared_ptr<const Texture> texture;  // null = none; needs mesh uvs
+  float specular = 0;                      // Blinn-Phong weight ks in [0, 1] (0 = off)
+  float shininess = 32;                    // Blinn-Phong exponent
+};
+
+// A light at infinity: parallel rays arriving from `direction` (unit, world frame, pointing from
+// the scene towards the light). `irradiance` is linear RGB irradiance on a surface facing it.
+struct DirectionalLight {
+  Vec3 direction{0, -1, 0};
+  Vec3 irradiance{3.14159265f, 3.14159265f, 3.14159265f};
+  bool enabled = true;
+};
+
+// An isotropic point light at `position` (world, metres); `intensity` is linear RGB radiant
+// intensity: irradiance intensity * cos / r^2 at distance r.
+struct PointLight {
+  Vec3 position{0, 2, 0};
+  Vec3 intensity{1, 1, 1};
+  bool enabled = true;
+};
+
+// Distant environment light (unshadowed; see docs/raytrace.md): incident radiance
+// L(w) = sum_i sh[i] Y_i(w), w a world-frame direction, 9 coefficients (bands 0..2, convention of
+// msgs/sh_light.h), linear RGB each, multiplied by `scale`. A lat-long map is projected to these
+// 9 coefficients by SetEnvironmentMap.
+struct Environment {
+  std::array<Vec3, 9> sh{};
+  float scale = 1;
+};
+
+// One ray for the batched queries: origin (world, metres), direction (world, any non-zero length;
+// t is in units of its length), interval [t_near, t_far].
+struct Ray {
+  Vec3 origin;
+  Vec3 direction;
+  float t_near = 0;
+  float t_far = 1e30f;
+};
+
+// Closest hit of a ray. object = index returned by Scene::AddObject, or -1 for a miss.
+struct Hit {
+  int32_t object = -1;
+  uint32_t triangle = 0;
+  float t = 0;  // ray parameter of the hit
+  float u = 0;  // barycentric weight of vertex 1
+  float v = 0;  // barycentric weight of vertex 2
+};
+
+// The scene's description of a hit point (world frame).
+struct SurfacePoint {
+  Vec3 position;
+  Vec3 normal;            // unit shading normal, facing the ray origin
+  Vec3 geometric_normal;  // unit, facing the ray origin
+  Vec3 albedo;            // linear RGB
+  const Material* material = nullptr;
+  uint32_t object_id = 0;  // the object's id (AddObject)
+};
+
+class Scene {
+ public:
+  Scene();
+  ~Scene();
+  Scene(const Scene&) = delete;
+  Scene& operator=(const Scene&) = delete;
+
+  // Adds `mesh` (object frame) placed by `object_to_world` with `material`; `id` is what the
+  // object-id image shows for it (> 0; ids need not be unique). Returns the object's index.
+  // Throws RaytraceError for an invalid mesh or id 0.
+  int AddObject(Mesh mesh, Material material, const Transform& object_to_world, uint32_t id);
+  // Moves object `index` (its mesh keeps its object-frame shape). Takes effect at Commit().
+  void SetObjectTransform(int index, const Transform& object_to_world);
+  // Hides (false) or shows object `index`. Takes effect at Commit().
+  void SetObjectVisible(int index, bool visible);
+  const Transform& ObjectTransform(int index) const;
+  uint32_t ObjectId(int index) const;
+  int object_count() const;
+  // Total triangles of all objects.
+  size_t triangle_count() const;
+
+  // Lights: replace the lists (take effect immediately; lights are not part of the BVH).
+  std::vector<DirectionalLight>& directional_lights();
+  const std::vector<DirectionalLight>& directional_lights() const;
+  std::vector<PointLight>& point_lights();
+  const std::vector<PointLight>& point_lights() const;
+  Environment& environment();
+  const Environment& environment() const;
+  // Sets the environment to the band-0..2 projection of a lat-long map (world frame: the map's
+  // column u covers azimuth phi = 2 pi (u + 0.5) / width measured from +x towards +z, row v the
+  // polar angle theta = pi (v + 0.5) / height from +y (up) downwards), radiance times `scale`.
+  void SetEnvironmentMap(const Texture& map, float scale);
+
+  // Builds or updates the acceleration structure. Must be called after AddObject /
+  // SetObjectTransform / SetObjectVisible and before any query.
+  void Commit();
+
+  // Closest hits of `rays` into `hits` (same size), using `pool` (null = calling thread). Thread-
+  // safe between Commits. Throws RaytraceError if the sizes differ or the scene is not committed.
+  void Intersect(std::span<const Ray> rays, std::span<Hit> hits, ThreadPool* pool = nullptr) const;
+  // Visibility of `rays` into `visible` (1 = nothing hit in [t_near, t_far], 0 = occluded): the
+  // batched occlusion query of shadow rays and PRT bakes. Same contract as Intersect.
+  void Occluded(std::span<const Ray> rays, std::span<uint8_t> visible,
+                ThreadPool* pool = nullptr) const;
+  // Surface attributes at `hit` of `ray` (hit.object >= 0).
+  SurfacePoint Surface(const Ray& ray, const Hit& hit) const;
+
+  // Internal: the Embree scene handle (RTCScene) for the renderer.
+  void* embree_scene() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// A fixed pool of std::threads running index ranges in parallel; deterministic results are the
+// caller's business (work items must not depend on which thread runs them).
+class ThreadPool {
+ public:
+  // `threads` >= 1 workers (the calling thread also works while waiting).
+  explicit ThreadPool(int threads);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+  int thread_count() const;
+  // Calls fn(i) for every i in [0, count) across the workers and returns when all are done.
+  // Exceptions thrown by fn are rethrown here (the first one).
+  void ParallelFor(size_t count, const std::function<void(size_t)>& fn);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace probeless::raytrace

@@ -1,0 +1,172 @@
+// raytrace_bench: speed of the ray tracer and the simulator.
+//
+//   raytrace_bench [--scenario FILE.yaml] [--frames N] [--threads N] [--json OUT]
+//
+// Rows: (1) whole simulator frames (render + sensor effects + ground truth) of the scenario,
+// default data/scenarios/room_dynamic.yaml at its 640x480 with shadows; (2) the renderer alone on
+// the same frames; (3) batched closest-hit and (4) occlusion queries of random rays through the
+// scene (the PRT-bake API). Prints a table; --json writes the same figures.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "probeless/raytrace/render.h"
+#include "probeless/sim/simulator.h"
+
+namespace {
+
+using namespace probeless;
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
+
+struct Row {
+  std::string name;
+  double seconds = 0;
+  double frames = 0;  // 0 for ray-only rows
+  double rays = 0;
+};
+
+int Run(int argc, char** argv) {
+  std::string scenario_path =
+      std::string(PROBELESS_SOURCE_DIR) + "/data/scenarios/room_dynamic.yaml";
+  int frames = 30;
+  int threads = 2;
+  std::string json;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--scenario") {
+      scenario_path = value();
+    } else if (a == "--frames") {
+      frames = std::stoi(value());
+    } else if (a == "--threads") {
+      threads = std::stoi(value());
+    } else if (a == "--json") {
+      json = value();
+    } else {
+      throw std::invalid_argument("unknown option '" + a +
+                                  "' (expected --scenario, --frames, "
+                                  "--threads, --json)");
+    }
+  }
+  if (frames < 1 || threads < 1) throw std::invalid_argument("--frames and --threads must be >= 1");
+  sim::Scenario scenario = sim::LoadScenario(scenario_path);
+  const uint64_t n = std::min<uint64_t>(frames, scenario.frames);
+  sim::Simulator simulator(scenario, threads);
+  std::vector<Row> rows;
+
+  // (1) Whole simulator frames, spread over the scenario.
+  simulator.Render(0);  // warm-up: first BVH build, LUTs
+  {
+    Row r{"simulator frame (render + sensor + ground truth)"};
+    const auto t0 = Clock::now();
+    for (uint64_t k = 0; k < n; ++k) {
+      const sim::SimFrame f =
+          simulator.Render(k * (scenario.frames - 1) / std::max<uint64_t>(1, n - 1));
+      r.rays += static_cast<double>(f.render.rays);
+    }
+    r.seconds = Seconds(t0, Clock::now());
+    r.frames = static_cast<double>(n);
+    rows.push_back(r);
+  }
+  // (2) The renderer alone on the last frame's scene state.
+  const sim::SimFrame last = simulator.Render(scenario.frames / 2);
+  raytrace::RenderOptions options;
+  options.shadows = scenario.render.shadows;
+  raytrace::ThreadPool pool(threads);
+  {
+    Row r{"render only (primary + shadow rays, shading)"};
+    const auto t0 = Clock::now();
+    for (uint64_t k = 0; k < n; ++k) {
+      r.rays += static_cast<double>(
+          raytrace::Render(simulator.scene(), last.camera, options, &pool).rays);
+    }
+    r.seconds = Seconds(t0, Clock::now());
+    r.frames = static_cast<double>(n);
+    rows.push_back(r);
+  }
+  // (3), (4) Random rays from the camera position (incoherent), batched.
+  std::vector<raytrace::Ray> rays(1 << 20);
+  uint64_t state = 12345;
+  auto uniform = [&] {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<float>(state >> 40) / 16777216.0f * 2 - 1;
+  };
+  const auto& t = last.camera.camera_to_world.translation;
+  for (auto& ray : rays) {
+    ray.origin = {static_cast<float>(t[0]), static_cast<float>(t[1]), static_cast<float>(t[2])};
+    ray.direction = raytrace::Normalize({uniform(), uniform(), uniform()});
+    ray.t_far = 100;
+  }
+  {
+    Row r{"closest hit, 1M random rays (Scene::Intersect)"};
+    std::vector<raytrace::Hit> hits(rays.size());
+    const auto t0 = Clock::now();
+    simulator.scene().Intersect(rays, hits, &pool);
+    r.seconds = Seconds(t0, Clock::now());
+    r.rays = static_cast<double>(rays.size());
+    rows.push_back(r);
+  }
+  {
+    Row r{"occlusion, 1M random rays (Scene::Occluded)"};
+    std::vector<uint8_t> visible(rays.size());
+    const auto t0 = Clock::now();
+    simulator.scene().Occluded(rays, visible, &pool);
+    r.seconds = Seconds(t0, Clock::now());
+    r.rays = static_cast<double>(rays.size());
+    rows.push_back(r);
+  }
+
+  std::printf("raytrace_bench: %s, %dx%d, shadows %s, %zu triangles, %d threads (%u cores)\n",
+              scenario.name.c_str(), scenario.camera.width, scenario.camera.height,
+              options.shadows ? "on" : "off", simulator.scene().triangle_count(), threads,
+              std::thread::hardware_concurrency());
+  std::printf("%-50s %10s %10s %14s\n", "row", "fps", "ms/frame", "Mrays/s");
+  for (const Row& r : rows) {
+    const double fps = r.frames > 0 ? r.frames / r.seconds : 0;
+    std::printf("%-50s %10.2f %10.1f %14.2f\n", r.name.c_str(), fps,
+                r.frames > 0 ? 1000 * r.seconds / r.frames : 0.0, r.rays / r.seconds / 1e6);
+  }
+  if (!json.empty()) {
+    std::ofstream out(json);
+    out << "{\n  \"scenario\": \"" << scenario.name << "\",\n  \"width\": " << scenario.camera.width
+        << ",\n  \"height\": " << scenario.camera.height
+        << ",\n  \"shadows\": " << (options.shadows ? "true" : "false")
+        << ",\n  \"triangles\": " << simulator.scene().triangle_count()
+        << ",\n  \"threads\": " << threads << ",\n  \"frames\": " << n << ",\n  \"rows\": [\n";
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const Row& r = rows[i];
+      out << "    {\"name\": \"" << r.name << "\", \"seconds\": " << r.seconds
+          << ", \"fps\": " << (r.frames > 0 ? r.frames / r.seconds : 0)
+          << ", \"rays\": " << static_cast<uint64_t>(r.rays)
+          << ", \"rays_per_second\": " << static_cast<uint64_t>(r.rays / r.seconds) << "}"
+          << (i + 1 < rows.size() ? "," : "") << "\n";
+    }
+    out << "  ]\n}\n";
+    if (!out) throw std::runtime_error("cannot write '" + json + "'");
+    std::printf("wrote %s\n", json.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "[error] [raytrace_bench] %s\n", e.what());
+    return 2;
+  }
+}
