@@ -1,0 +1,157 @@
+// calibrate: checkerboard calibration of a camera from its image topic; writes a ROS camera_info
+// YAML file that every capture node reads with param camera_info_url.
+//
+//   calibrate --size 9x6 --square 0.025 [--topic /camera/image] [--frames 20] [--out camera.yaml]
+//             [--name webcam] [--min-interval 0.5]
+//
+// --size is the number of INNER corners (columns x rows); --square the square side in metres.
+// Collects --frames views in which the whole board is found (at least --min-interval seconds
+// apart; move the board between them: tilt it, cover the corners of the image), then runs
+// cv::calibrateCamera (plumb_bob) and prints the RMS reprojection error. Exit: 0 written,
+// 1 calibration failed, 2 bad options.
+#include <chrono>
+#include <cstdio>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include "probeless/capture/intrinsics.h"
+#include "probeless/msgs/image.h"
+#include "probeless/node/node.h"
+
+namespace {
+
+using namespace probeless;
+
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "calibrate");
+  std::string topic = node.Param("topic", "/camera/image");
+  std::string out = node.Param("out", "camera.yaml");
+  std::string name = node.Param("name", "camera");
+  std::string size_text = node.Param("size", "9x6");
+  double square = node.Param("square", 0.025);
+  int frames = node.Param("frames", 20);
+  double min_interval = node.Param("min_interval", 0.5);
+  const auto& args = node.args();
+  for (size_t i = 0; i < args.size(); ++i) {
+    auto value = [&]() -> std::string {
+      if (i + 1 >= args.size()) throw UsageError(args[i] + " needs a value");
+      return args[++i];
+    };
+    const std::string a = args[i];
+    if (a == "--topic")
+      topic = value();
+    else if (a == "--out")
+      out = value();
+    else if (a == "--name")
+      name = value();
+    else if (a == "--size")
+      size_text = value();
+    else if (a == "--square")
+      square = std::stod(value());
+    else if (a == "--frames")
+      frames = std::stoi(value());
+    else if (a == "--min-interval")
+      min_interval = std::stod(value());
+    else
+      throw UsageError("unknown option '" + a + "'");
+  }
+  int cols = 0, rows = 0;
+  if (std::sscanf(size_text.c_str(), "%dx%d", &cols, &rows) != 2 || cols < 2 || rows < 2) {
+    throw UsageError("--size must be COLSxROWS inner corners, e.g. 9x6, got '" + size_text + "'");
+  }
+  if (!(square > 0) || frames < 3) throw UsageError("--square must be > 0 and --frames >= 3");
+  const cv::Size pattern(cols, rows);
+  std::vector<cv::Point3f> board;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) board.emplace_back(c * square, r * square, 0.0f);
+  }
+  bus::Subscriber subscriber = node.CreateSubscriber<msgs::Image>(topic, {.queue_depth = 1});
+  node.Info() << "waiting for a " << cols << "x" << rows << " board on " << topic << " (" << frames
+              << " views)";
+  std::vector<std::vector<cv::Point2f>> image_points;
+  cv::Size image_size;
+  auto last = std::chrono::steady_clock::now() - std::chrono::hours(1);
+  while (node.ok() && static_cast<int>(image_points.size()) < frames) {
+    std::optional<bus::Sample> sample = subscriber.Take(std::chrono::milliseconds(100));
+    if (!sample) continue;
+    msgs::ReadView<msgs::Image> im = msgs::ReadMessage<msgs::Image>(sample->data());
+    cv::Mat grey;
+    const int type = im->encoding == msgs::Encoding::kMono8 ? CV_8UC1 : CV_8UC3;
+    if (im->encoding != msgs::Encoding::kMono8 && im->encoding != msgs::Encoding::kRgb8 &&
+        im->encoding != msgs::Encoding::kBgr8) {
+      throw UsageError(topic + " carries " + std::string(msgs::EncodingName(im->encoding)) +
+                       " images: expected rgb8, bgr8 or mono8");
+    }
+    im->Validate(im.payload.size());
+    cv::Mat view(static_cast<int>(im->height), static_cast<int>(im->width), type,
+                 const_cast<std::byte*>(im.payload.data()), im->step);
+    if (type == CV_8UC3) {
+      cv::cvtColor(view, grey,
+                   im->encoding == msgs::Encoding::kRgb8 ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+    } else {
+      grey = view;
+    }
+    if (std::chrono::steady_clock::now() - last < std::chrono::duration<double>(min_interval)) {
+      continue;
+    }
+    std::vector<cv::Point2f> corners;
+    if (!cv::findChessboardCorners(grey, pattern, corners,
+                                   cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE |
+                                       cv::CALIB_CB_FAST_CHECK)) {
+      continue;
+    }
+    cv::cornerSubPix(grey, corners, cv::Size(11, 11), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 30, 0.01));
+    image_points.push_back(corners);
+    image_size = grey.size();
+    last = std::chrono::steady_clock::now();
+    node.Info() << "view " << image_points.size() << "/" << frames;
+  }
+  if (static_cast<int>(image_points.size()) < frames) return 0;  // interrupted
+  std::vector<std::vector<cv::Point3f>> object_points(image_points.size(), board);
+  cv::Mat k, d;
+  std::vector<cv::Mat> rvecs, tvecs;
+  const double rms =
+      cv::calibrateCamera(object_points, image_points, image_size, k, d, rvecs, tvecs);
+  capture::Intrinsics intrinsics;
+  intrinsics.width = static_cast<uint32_t>(image_size.width);
+  intrinsics.height = static_cast<uint32_t>(image_size.height);
+  intrinsics.fx = k.at<double>(0, 0);
+  intrinsics.fy = k.at<double>(1, 1);
+  intrinsics.cx = k.at<double>(0, 2);
+  intrinsics.cy = k.at<double>(1, 2);
+  intrinsics.model = msgs::DistortionModel::kPlumbBob;
+  for (int i = 0; i < 5; ++i) intrinsics.distortion.push_back(d.at<double>(0, i));
+  capture::WriteCameraInfoYaml(out, intrinsics, name);
+  std::printf(
+      "calibrate: %zu views, RMS reprojection error %.3f px, fx %.2f fy %.2f cx %.2f cy %.2f -> "
+      "%s\n",
+      image_points.size(), rms, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy,
+      out.c_str());
+  if (rms > 1.0) node.Warn() << "RMS error above 1 px: use more, sharper, more varied views";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
+    return 2;
+  } catch (const probeless::node::NodeError& e) {
+    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
+    return 1;
+  }
+}
