@@ -1,5 +1,6 @@
 // Unit tests of the node runtime: arguments, parameters, params files, topic names, logging and
 // shutdown (no bus traffic; see node_bus_test.cpp for that).
+#include "probeless/node/main.h"
 #include "probeless/node/node.h"
 
 #include <fcntl.h>
@@ -633,6 +634,36 @@ TEST(ShutdownTest, RateSleepsAndStopsOnRequest) {
   });
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+// The shared main: bad input is exit 2 with one line, anything else exit 1.
+TEST(RunMainTest, MapsExceptionsToExitCodesAndOneLine) {
+  struct FormatError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+  };
+  EXPECT_EQ(RunMain("t", [] { return 7; }), 7);
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(RunMain("t", []() -> int { throw UsageError("--rate needs a value"); }), 2);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] --rate needs a value\n");
+  EXPECT_EQ(RunMain("t", []() -> int { throw NodeError("bad param"); }), 2);
+  EXPECT_EQ(RunMain<FormatError>("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 2);
+  EXPECT_EQ(RunMain("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 1);
+  testing::internal::CaptureStderr();
+  EXPECT_EQ(RunMain("t", []() -> int { throw std::runtime_error("disk full"); }), 1);
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] disk full\n");
+}
+
+TEST(RunMainTest, ParseNumberOption) {
+  EXPECT_DOUBLE_EQ(ParseNumberOption("--rate", "2.5"), 2.5);
+  EXPECT_DOUBLE_EQ(ParseNumberOption("--n", "-3"), -3);
+  for (const char* bad : {"", "fast", "2x", "nan", "inf"}) {
+    try {
+      ParseNumberOption("--rate", bad);
+      ADD_FAILURE() << bad;
+    } catch (const UsageError& e) {
+      EXPECT_EQ(std::string(e.what()), std::string("--rate expects a number, got '") + bad + "'");
+    }
+  }
 }
 
 }  // namespace

@@ -18,6 +18,8 @@
 // Keyboard (when stdin is a terminal): space pause/resume, s step, + / - rate x1.25 / /1.25, q
 // quit. Exit: 0 at the end of the source (or on SIGINT/SIGTERM), 2 on bad options or input, 1
 // otherwise.
+#include "probeless/node/main.h"
+
 #include <poll.h>
 #include <termios.h>
 #include <unistd.h>
@@ -41,25 +43,10 @@ namespace {
 
 using namespace probeless;
 
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-double ParseNumber(const std::string& option, const std::string& text) {
-  try {
-    size_t used = 0;
-    const double value = std::stod(text, &used);
-    if (used == text.size()) return value;
-  } catch (const std::exception&) {
-  }
-  throw UsageError(option + " expects a number, got '" + text + "'");
-}
-
 std::pair<std::string, std::string> ParseRemap(const std::string& text) {
   const size_t at = text.find(":=");
   if (at == std::string::npos || at == 0 || at + 2 == text.size()) {
-    throw UsageError("remap '" + text + "' is not of the form /from:=/to");
+    throw node::UsageError("remap '" + text + "' is not of the form /from:=/to");
   }
   return {text.substr(0, at), text.substr(at + 2)};
 }
@@ -68,7 +55,7 @@ std::vector<int> ParseSubjects(const std::string& text) {
   std::vector<int> subjects;
   std::stringstream in(text);
   for (std::string item; std::getline(in, item, ',');) {
-    subjects.push_back(static_cast<int>(ParseNumber("--subjects", item)));
+    subjects.push_back(static_cast<int>(node::ParseNumberOption("--subjects", item)));
   }
   return subjects;
 }
@@ -166,19 +153,19 @@ int Run(int argc, char** argv) {
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     auto value = [&]() -> const std::string& {
-      if (i + 1 >= args.size()) throw UsageError(a + " needs a value");
+      if (i + 1 >= args.size()) throw node::UsageError(a + " needs a value");
       return args[++i];
     };
     if (a == "--rate") {
-      options.rate = ParseNumber(a, value());
+      options.rate = node::ParseNumberOption(a, value());
     } else if (a == "--fast") {
       options.as_fast_as_possible = true;
     } else if (a == "--loop") {
       options.loop = true;
     } else if (a == "--start") {
-      options.start_s = ParseNumber(a, value());
+      options.start_s = node::ParseNumberOption(a, value());
     } else if (a == "--duration") {
-      options.duration_s = ParseNumber(a, value());
+      options.duration_s = node::ParseNumberOption(a, value());
     } else if (a == "--topics") {
       options.include.push_back(value());
     } else if (a == "--exclude") {
@@ -196,32 +183,32 @@ int Run(int argc, char** argv) {
     } else if (a == "--paused") {
       options.start_paused = true;
     } else if (a == "--delay") {
-      delay_s = ParseNumber(a, value());
+      delay_s = node::ParseNumberOption(a, value());
     } else if (a == "--fps") {
-      dataset_options.fps = ParseNumber(a, value());
+      dataset_options.fps = node::ParseNumberOption(a, value());
     } else if (a == "--camera-info") {
       dataset_options.camera_info_path = value();
     } else if (a == "--prefix") {
       dataset_options.topic_prefix = value();
     } else if (a == "--max-frames") {
-      dataset_options.max_frames = static_cast<uint64_t>(ParseNumber(a, value()));
+      dataset_options.max_frames = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
     } else if (a == "--subjects") {
       dataset_options.yaleb_subjects = ParseSubjects(value());
     } else if (a == "--slots") {
-      options.slot_count = static_cast<uint32_t>(ParseNumber(a, value()));
+      options.slot_count = static_cast<uint32_t>(node::ParseNumberOption(a, value()));
     } else if (a == "--no-keyboard") {
       keyboard = false;
     } else if (a.starts_with("--")) {
-      throw UsageError("unknown option '" + a + "'");
+      throw node::UsageError("unknown option '" + a + "'");
     } else if (!positional_seen) {
       source_spec = a;
       positional_seen = true;
     } else {
-      throw UsageError("more than one source given ('" + source_spec + "' and '" + a + "')");
+      throw node::UsageError("more than one source given ('" + source_spec + "' and '" + a + "')");
     }
   }
   if (source_spec.empty()) {
-    throw UsageError("no source given (an MCAP log or a dataset folder, or param 'source')");
+    throw node::UsageError("no source given (an MCAP log or a dataset folder, or param 'source')");
   }
   for (auto& name : options.lockstep_nodes) {
     if (!name.starts_with('/')) name = "/" + name;
@@ -283,22 +270,6 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "[error] [player] %s\n", e.what());
-    return 2;
-  } catch (const probeless::node::NodeError& e) {
-    std::fprintf(stderr, "[error] [player] %s\n", e.what());
-    return 2;
-  } catch (const probeless::dataset::DatasetError& e) {
-    std::fprintf(stderr, "[error] [player] %s\n", e.what());
-    return 2;
-  } catch (const std::invalid_argument& e) {
-    std::fprintf(stderr, "[error] [player] %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [player] %s\n", e.what());
-    return 1;
-  }
+  return probeless::node::RunMain<probeless::dataset::DatasetError>(
+      "player", [&] { return Run(argc, argv); });
 }

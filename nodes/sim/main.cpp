@@ -11,6 +11,8 @@
 // Topics: <prefix>/image (rgb8), <prefix>/depth (depth16, mm), <prefix>/camera_info,
 // <gt>/pose, <gt>/light, <gt>/face, /clock. Progress goes to stderr. Exit: 0 done (or SIGINT),
 // 2 bad options or scenario, 1 otherwise.
+#include "probeless/node/main.h"
+
 #include <chrono>
 #include <cstdio>
 #include <opencv2/imgcodecs.hpp>
@@ -27,21 +29,6 @@
 namespace {
 
 using namespace probeless;
-
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-double ParseNumber(const std::string& option, const std::string& text) {
-  try {
-    size_t used = 0;
-    const double value = std::stod(text, &used);
-    if (used == text.size()) return value;
-  } catch (const std::exception&) {
-  }
-  throw UsageError(option + " expects a number, got '" + text + "'");
-}
 
 // Progress lines at most once a second (and at the end): "frame k/N, x fps".
 std::function<void(uint64_t, uint64_t)> ProgressPrinter(const std::string& what) {
@@ -118,7 +105,7 @@ int Run(int argc, char** argv) {
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     auto value = [&]() -> const std::string& {
-      if (i + 1 >= args.size()) throw UsageError(a + " needs a value");
+      if (i + 1 >= args.size()) throw node::UsageError(a + " needs a value");
       return args[++i];
     };
     if (a == "--out") {
@@ -126,11 +113,11 @@ int Run(int argc, char** argv) {
     } else if (a == "--preview") {
       preview = value();
     } else if (a == "--frames") {
-      options.max_frames = static_cast<uint64_t>(ParseNumber(a, value()));
+      options.max_frames = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
     } else if (a == "--threads") {
-      options.threads = static_cast<int>(ParseNumber(a, value()));
+      options.threads = static_cast<int>(node::ParseNumberOption(a, value()));
     } else if (a == "--rate") {
-      player_options.rate = ParseNumber(a, value());
+      player_options.rate = node::ParseNumberOption(a, value());
     } else if (a == "--fast") {
       player_options.as_fast_as_possible = true;
     } else if (a == "--loop") {
@@ -144,17 +131,18 @@ int Run(int argc, char** argv) {
     } else if (a == "--no-clock") {
       player_options.clock_topic.clear();
     } else if (a.starts_with("--")) {
-      throw UsageError("unknown option '" + a + "'");
+      throw node::UsageError("unknown option '" + a + "'");
     } else if (!positional_seen) {
       scenario_path = a;
       positional_seen = true;
     } else {
-      throw UsageError("more than one scenario given ('" + scenario_path + "' and '" + a + "')");
+      throw node::UsageError("more than one scenario given ('" + scenario_path + "' and '" + a +
+                             "')");
     }
   }
   if (scenario_path.empty())
-    throw UsageError("no scenario given (a YAML file or param 'scenario')");
-  if (options.threads < 1) throw UsageError("--threads must be >= 1");
+    throw node::UsageError("no scenario given (a YAML file or param 'scenario')");
+  if (options.threads < 1) throw node::UsageError("--threads must be >= 1");
   for (auto& name : player_options.lockstep_nodes) {
     if (!name.starts_with('/')) name = "/" + name;
   }
@@ -206,22 +194,6 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "[error] [sim] %s\n", e.what());
-    return 2;
-  } catch (const probeless::node::NodeError& e) {
-    std::fprintf(stderr, "[error] [sim] %s\n", e.what());
-    return 2;
-  } catch (const probeless::dataset::DatasetError& e) {
-    std::fprintf(stderr, "[error] [sim] %s\n", e.what());
-    return 2;
-  } catch (const std::invalid_argument& e) {
-    std::fprintf(stderr, "[error] [sim] %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [sim] %s\n", e.what());
-    return 1;
-  }
+  return probeless::node::RunMain<probeless::dataset::DatasetError>(
+      "sim", [&] { return Run(argc, argv); });
 }

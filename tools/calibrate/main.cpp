@@ -9,6 +9,8 @@
 // apart; move the board between them: tilt it, cover the corners of the image), then runs
 // cv::calibrateCamera (plumb_bob) and prints the RMS reprojection error. Exit: 0 written,
 // 1 calibration failed, 2 bad options.
+#include "probeless/node/main.h"
+
 #include <chrono>
 #include <cstdio>
 #include <opencv2/calib3d.hpp>
@@ -24,11 +26,6 @@ namespace {
 
 using namespace probeless;
 
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "calibrate");
   std::string topic = node.Param("topic", "/camera/image");
@@ -41,7 +38,7 @@ int Run(int argc, char** argv) {
   const auto& args = node.args();
   for (size_t i = 0; i < args.size(); ++i) {
     auto value = [&]() -> std::string {
-      if (i + 1 >= args.size()) throw UsageError(args[i] + " needs a value");
+      if (i + 1 >= args.size()) throw node::UsageError(args[i] + " needs a value");
       return args[++i];
     };
     const std::string a = args[i];
@@ -54,19 +51,20 @@ int Run(int argc, char** argv) {
     else if (a == "--size")
       size_text = value();
     else if (a == "--square")
-      square = std::stod(value());
+      square = node::ParseNumberOption(a, value());
     else if (a == "--frames")
-      frames = std::stoi(value());
+      frames = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--min-interval")
-      min_interval = std::stod(value());
+      min_interval = node::ParseNumberOption(a, value());
     else
-      throw UsageError("unknown option '" + a + "'");
+      throw node::UsageError("unknown option '" + a + "'");
   }
   int cols = 0, rows = 0;
   if (std::sscanf(size_text.c_str(), "%dx%d", &cols, &rows) != 2 || cols < 2 || rows < 2) {
-    throw UsageError("--size must be COLSxROWS inner corners, e.g. 9x6, got '" + size_text + "'");
+    throw node::UsageError("--size must be COLSxROWS inner corners, e.g. 9x6, got '" + size_text +
+                           "'");
   }
-  if (!(square > 0) || frames < 3) throw UsageError("--square must be > 0 and --frames >= 3");
+  if (!(square > 0) || frames < 3) throw node::UsageError("--square must be > 0 and --frames >= 3");
   const cv::Size pattern(cols, rows);
   std::vector<cv::Point3f> board;
   for (int r = 0; r < rows; ++r) {
@@ -86,8 +84,8 @@ int Run(int argc, char** argv) {
     const int type = im->encoding == msgs::Encoding::kMono8 ? CV_8UC1 : CV_8UC3;
     if (im->encoding != msgs::Encoding::kMono8 && im->encoding != msgs::Encoding::kRgb8 &&
         im->encoding != msgs::Encoding::kBgr8) {
-      throw UsageError(topic + " carries " + std::string(msgs::EncodingName(im->encoding)) +
-                       " images: expected rgb8, bgr8 or mono8");
+      throw node::UsageError(topic + " carries " + std::string(msgs::EncodingName(im->encoding)) +
+                             " images: expected rgb8, bgr8 or mono8");
     }
     im->Validate(im.payload.size());
     cv::Mat view(static_cast<int>(im->height), static_cast<int>(im->width), type,
@@ -142,16 +140,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
-    return 2;
-  } catch (const probeless::node::NodeError& e) {
-    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [calibrate] %s\n", e.what());
-    return 1;
-  }
+  return probeless::node::RunMain("calibrate", [&] { return Run(argc, argv); });
 }

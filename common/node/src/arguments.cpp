@@ -1,6 +1,11 @@
 #include "arguments.h"
 
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
 #include "names.h"
+#include "probeless/node/main.h"
 #include "probeless/node/node.h"
 
 namespace probeless::node::internal {
@@ -143,3 +148,18 @@ ParsedArguments ParseArguments(const std::vector<std::string>& argv) {
 }
 
 }  // namespace probeless::node::internal
+
+namespace probeless::node {
+
+double ParseNumberOption(std::string_view option, std::string_view text) {
+  const std::string copy(text);
+  try {
+    size_t used = 0;
+    const double value = std::stod(copy, &used);
+    if (used == copy.size() && std::isfinite(value)) return value;
+  } catch (const std::exception&) {
+  }
+  throw UsageError(std::string(option) + " expects a number, got '" + copy + "'");
+}
+
+}  // namespace probeless::node
