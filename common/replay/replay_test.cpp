@@ -2,6 +2,7 @@
 // (timing, rate, filters, remaps, loop, start/duration, pause/step/rate by control topic, lock-step
 // with a slow node in another process).
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -410,6 +411,64 @@ TEST(PlayerTest, LockStepDeliversEveryFrameInOrderThroughASlowNode) {
     ASSERT_EQ(seen.size(), static_cast<size_t>(kFrames)) << "run " << run;
     for (int i = 0; i < kFrames; ++i) EXPECT_EQ(seen[i], i) << "run " << run;
   }
+}
+
+// A chain: /relay takes /cam/image and republishes it on /mid/image after 2 ms; /sink (queue of 1,
+// 3 ms per image) only subscribes /mid/image — no played topic. Lock-step with both waits for the
+// whole chain, so the sink sees every frame in order.
+TEST(PlayerTest, LockStepCoversNodesDownstreamOfThePlayedTopics) {
+  constexpr int kFrames = 60;
+  const fs::path result = TempDir() / "chain.txt";
+  fs::remove(result);
+  const pid_t relay = fork();
+  if (relay == 0) {
+    node::Node node(std::vector<std::string>{"relay"}, "relay");
+    bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/cam/image", {.queue_depth = 1});
+    bus::Publisher out = node.CreatePublisher<msgs::Image>(
+        "/mid/image",
+        {.max_message_bytes = msgs::Image::MessageBytesFor(8, 4, msgs::Encoding::kMono8)});
+    node.Spin({{&in, [&](bus::Sample&& s) {
+                  std::this_thread::sleep_for(2ms);
+                  out.PublishCopy(s.data());
+                }}});
+    _exit(0);
+  }
+  const pid_t sink = fork();
+  if (sink == 0) {
+    node::Node node(std::vector<std::string>{"sink"}, "sink");
+    bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/mid/image", {.queue_depth = 1});
+    std::vector<int> seen;
+    node.Spin({{&in, [&](bus::Sample&& s) {
+                  seen.push_back(
+                      static_cast<int>(msgs::ReadMessage<msgs::Image>(s.data()).payload[0]));
+                  std::this_thread::sleep_for(3ms);
+                  if (static_cast<int>(seen.size()) >= kFrames) node::RequestShutdown();
+                }}});
+    {
+      std::ofstream out(result);
+      for (int v : seen) out << v << "\n";
+    }  // flushed before _exit
+    _exit(0);
+  }
+  VectorSource source(kFrames, 1'000'000);
+  PlayerOptions o = Quiet();
+  o.as_fast_as_possible = true;
+  o.include = {"/cam/image"};
+  o.lockstep_nodes = {"/relay", "/sink"};
+  Player player(source, o);
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  const PlayerStats stats = player.Run([&] { return std::chrono::steady_clock::now() < deadline; });
+  EXPECT_EQ(stats.published, static_cast<uint64_t>(kFrames));
+  int status = 0;
+  waitpid(sink, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "sink status " << status;
+  kill(relay, SIGINT);
+  waitpid(relay, &status, 0);
+  std::vector<int> seen;
+  std::ifstream in(result);
+  for (int v; in >> v;) seen.push_back(v);
+  ASSERT_EQ(seen.size(), static_cast<size_t>(kFrames));
+  for (int i = 0; i < kFrames; ++i) EXPECT_EQ(seen[i], i);
 }
 
 }  // namespace

@@ -57,11 +57,11 @@ struct Player::Impl {
 
   struct LockstepNode {
     std::string name;
-    bus::Subscriber acks;
-    bool gone = false;  // stopped subscribing: no longer waited for
+    std::string ack_topic;
+    bus::Subscriber acks;  // only to wake up when the node acknowledges something
+    bool gone = false;     // left the bus: not waited for until it is back
   };
   std::vector<LockstepNode> lock_nodes;
-  std::vector<std::vector<size_t>> subscribers_of;  // topic index -> lock_nodes indices
   std::optional<bus::WaitSet> ack_wait_set;
 
   mutable std::mutex mutex;  // guards the control state below
@@ -182,107 +182,130 @@ struct Player::Impl {
     }
   }
 
-  // Which lock-step nodes subscribe to which published topic, from the bus registry.
-  void RefreshSubscribers() {
-    const auto snapshot = bus::ListTopics();
-    subscribers_of.assign(published_topics.size(), {});
-    for (size_t t = 0; t < published_topics.size(); ++t) {
-      if (published_topics[t].empty()) continue;
-      for (const auto& topic : snapshot) {
-        if (topic.topic != published_topics[t]) continue;
-        for (size_t n = 0; n < lock_nodes.size(); ++n) {
-          for (const auto& sub : topic.subscribers) {
-            if (sub.alive && sub.node_name == lock_nodes[n].name) {
-              subscribers_of[t].push_back(n);
-              break;
-            }
+  // The work state of every lock-step node, from one bus registry snapshot.
+  struct NodeState {
+    bool present = false;  // has at least one live subscriber
+    uint64_t inputs = 0;   // samples delivered to its subscribers (received - dropped)
+    uint64_t queued = 0;   // of those, still queued
+    uint64_t acks = 0;     // acknowledgements published on <node>/ack
+    bool Idle() const { return present && queued == 0 && acks >= inputs; }
+    bool operator==(const NodeState&) const = default;
+  };
+
+  std::vector<NodeState> Snapshot() const {
+    std::vector<NodeState> states(lock_nodes.size());
+    for (const auto& topic : bus::ListTopics()) {
+      for (size_t n = 0; n < lock_nodes.size(); ++n) {
+        NodeState& state = states[n];
+        for (const auto& sub : topic.subscribers) {
+          if (!sub.alive || sub.node_name != lock_nodes[n].name) continue;
+          state.present = true;
+          state.inputs += sub.received - sub.dropped;
+          state.queued += sub.queued;
+        }
+        if (topic.topic == lock_nodes[n].ack_topic) {
+          for (const auto& pub : topic.publishers) {
+            if (pub.alive) state.acks += pub.published;
           }
         }
       }
     }
+    return states;
   }
 
+  void DrainAcks() {
+    for (auto& n : lock_nodes) {
+      while (n.acks.TryTake()) {
+      }
+    }
+  }
+
+  // Before the first message: every lock-step node is on the bus (has subscribers) and its set of
+  // subscriptions has been stable for 100 ms (it finished creating them).
   bool WaitForLockstepNodes(const std::function<bool()>& keep_going) {
     const int64_t start = MonoNs();
     int64_t next_warning = start + options.lockstep_warn_after.count() * 1'000'000;
+    int64_t stable_since = 0;
+    std::vector<size_t> previous_counts;
     for (;;) {
-      RefreshSubscribers();
-      std::vector<std::string> missing;
-      for (size_t n = 0; n < lock_nodes.size(); ++n) {
-        bool found = false;
-        for (const auto& nodes : subscribers_of) {
-          found |= std::find(nodes.begin(), nodes.end(), n) != nodes.end();
+      std::vector<size_t> counts(lock_nodes.size(), 0);
+      for (const auto& topic : bus::ListTopics()) {
+        for (size_t n = 0; n < lock_nodes.size(); ++n) {
+          for (const auto& sub : topic.subscribers) {
+            counts[n] += sub.alive && sub.node_name == lock_nodes[n].name;
+          }
         }
-        if (!found) missing.push_back(lock_nodes[n].name);
       }
-      if (missing.empty()) return true;
-      if (!keep_going()) return false;
       const int64_t now = MonoNs();
+      const bool all_present =
+          std::all_of(counts.begin(), counts.end(), [](size_t c) { return c > 0; });
+      if (!all_present || counts != previous_counts) stable_since = now;
+      previous_counts = counts;
+      if (all_present && now - stable_since >= 100'000'000) return true;
+      if (!keep_going()) return false;
       if (now >= next_warning) {
         std::string names;
-        for (const auto& m : missing) names += (names.empty() ? "" : ", ") + m;
-        Log("[warn] player: lock-step: still waiting for " + names +
-            " to subscribe to one of the played topics (" +
+        for (size_t n = 0; n < lock_nodes.size(); ++n) {
+          if (counts[n] == 0) names += (names.empty() ? "" : ", ") + lock_nodes[n].name;
+        }
+        Log("[warn] player: lock-step: still waiting for " + names + " to appear on the bus (" +
             std::to_string((now - start) / 1'000'000'000) + " s)");
         next_warning = now + options.lockstep_warn_after.count() * 1'000'000;
       }
-      SleepUntilMono(now + kPollNs);
+      SleepUntilMono(now + 10'000'000);
     }
   }
 
-  // Waits for every lock-step node subscribed to topic `t` to acknowledge bus sequence `sequence`.
-  bool WaitForAcks(size_t t, uint64_t sequence, const std::function<bool()>& keep_going,
-                   double* waited_s) {
-    std::vector<size_t> pending;
-    for (size_t n : subscribers_of[t]) {
-      if (!lock_nodes[n].gone) pending.push_back(n);
-    }
-    const int32_t pid = getpid();
+  // After a message: waits until every lock-step node is idle — everything delivered to it has
+  // been acknowledged — in two consecutive snapshots that agree. A node's outputs are published
+  // before it acknowledges the input that caused them, so once an upstream node is idle its
+  // outputs are counted as inputs of the downstream nodes; the second, equal snapshot proves that
+  // nothing arrived between the reads of one snapshot. So the whole chain has finished with the
+  // message, whether or not a node subscribes to the played topic itself.
+  bool WaitForQuiescence(const std::function<bool()>& keep_going, double* waited_s) {
     const int64_t start = MonoNs();
-    int64_t next_check = start + 1'000'000'000;
     int64_t next_warning = start + options.lockstep_warn_after.count() * 1'000'000;
-    while (!pending.empty()) {
-      for (auto it = pending.begin(); it != pending.end();) {
-        bool acked = false;
-        while (auto sample = lock_nodes[*it].acks.TryTake()) {
-          if (sample->data().size() < sizeof(msgs::Ack)) continue;
-          const auto ack = msgs::ReadMessage<msgs::Ack>(sample->data());
-          if (ack->publisher_pid == pid && ack->publish_sequence == sequence &&
-              ack->Topic() == published_topics[t]) {
-            acked = true;
+    std::optional<std::vector<NodeState>> previous;
+    for (;;) {
+      std::vector<NodeState> states = Snapshot();
+      bool all_idle = true;
+      for (size_t n = 0; n < states.size(); ++n) {
+        if (!states[n].present) {  // died or left: not waited for until it is back
+          if (!lock_nodes[n].gone) {
+            Log("[warn] player: lock-step: " + lock_nodes[n].name +
+                " has left the bus; not waiting for it");
+            lock_nodes[n].gone = true;
           }
+          continue;
         }
-        it = acked ? pending.erase(it) : it + 1;
+        lock_nodes[n].gone = false;
+        all_idle &= states[n].Idle();
       }
-      if (pending.empty()) break;
+      if (all_idle && previous && *previous == states) break;
+      previous = all_idle ? std::optional(std::move(states)) : std::nullopt;
+      if (previous) continue;  // confirm at once
       if (!keep_going()) return false;
       PollControl();
-      ack_wait_set->Wait(std::chrono::nanoseconds(kPollNs));
+      ack_wait_set->Wait(std::chrono::milliseconds(2));
+      DrainAcks();
       const int64_t now = MonoNs();
-      if (now >= next_check) {  // a node that died or unsubscribed is not waited for
-        RefreshSubscribers();
-        for (auto it = pending.begin(); it != pending.end();) {
-          const auto& now_subscribed = subscribers_of[t];
-          if (std::find(now_subscribed.begin(), now_subscribed.end(), *it) ==
-              now_subscribed.end()) {
-            Log("[warn] player: lock-step: " + lock_nodes[*it].name + " no longer subscribes to " +
-                published_topics[t] + "; not waiting for it");
-            it = pending.erase(it);
-          } else {
-            ++it;
+      if (now >= next_warning) {
+        std::string names;
+        const auto current = Snapshot();
+        for (size_t n = 0; n < current.size(); ++n) {
+          if (current[n].present && !current[n].Idle()) {
+            names +=
+                (names.empty() ? "" : ", ") + lock_nodes[n].name + " (" +
+                std::to_string(current[n].inputs - std::min(current[n].inputs, current[n].acks)) +
+                " unacknowledged)";
           }
         }
-        next_check = now + 1'000'000'000;
-      }
-      if (now >= next_warning && !pending.empty()) {
-        std::string names;
-        for (size_t n : pending) names += (names.empty() ? "" : ", ") + lock_nodes[n].name;
         Log("[warn] player: lock-step: waiting " + std::to_string((now - start) / 1'000'000) +
-            " ms for " + names + " to acknowledge " + published_topics[t] + " #" +
-            std::to_string(sequence));
+            " ms for " + names);
         next_warning = now + options.lockstep_warn_after.count() * 1'000'000;
       }
     }
+    DrainAcks();
     *waited_s += static_cast<double>(MonoNs() - start) / 1e9;
     return true;
   }
@@ -354,7 +377,8 @@ Player::Player(dataset::Source& source, PlayerOptions options)
       so.queue_depth = 64;
       so.node_name = o.node_name;
       impl.lock_nodes.push_back(
-          {name, bus::Subscriber(name + "/ack", msgs::TopicTypeOf<msgs::Ack>(), so)});
+          {name, name + "/ack",
+           bus::Subscriber(name + "/ack", msgs::TopicTypeOf<msgs::Ack>(), so)});
     }
     for (auto& n : impl.lock_nodes) impl.ack_wait_set->Add(n.acks);
   }
@@ -390,7 +414,7 @@ PlayerStats Player::Run(const std::function<bool()>& keep_going) {
       const auto bytes = std::span<const std::byte>(message->message.bytes());
       bus::Loan loan = impl.publishers[t]->Borrow(bytes.size());
       std::memcpy(loan.data().data(), bytes.data(), bytes.size());
-      const uint64_t sequence = impl.publishers[t]->Publish(std::move(loan));
+      impl.publishers[t]->Publish(std::move(loan));
       if (impl.clock) {
         bus::Loan c = impl.clock->Borrow(sizeof(msgs::Header));
         auto header = msgs::WriteMessage<msgs::Header>(c.data());
@@ -405,7 +429,7 @@ PlayerStats Player::Run(const std::function<bool()>& keep_going) {
       last_played = log_time;
       played += 1;
       if (!impl.lock_nodes.empty()) {
-        if (!impl.WaitForAcks(t, sequence, keep_going, &stats.lockstep_wait_s)) return stats;
+        if (!impl.WaitForQuiescence(keep_going, &stats.lockstep_wait_s)) return stats;
         std::lock_guard<std::mutex> lock(impl.mutex);
         impl.reanchor = true;  // time spent waiting does not make later messages late
       }

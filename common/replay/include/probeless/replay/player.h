@@ -5,12 +5,16 @@
 // (absolute sleeps, so errors do not accumulate); pausing, stepping and rate changes re-anchor the
 // schedule at the current message. The next message is decoded while waiting for its time.
 //
-// Lock-step (options.lockstep_nodes non-empty): after publishing a message on topic T the player
-// waits until every named node that subscribes to T has acknowledged it on "<node>/ack" (a
-// msgs::Ack naming T, the player's pid and the bus sequence; node::Node::Spin sends them). So no
-// message is dropped however slow the node, and a replay through a node is deterministic. Before
-// the first message the player waits until each named node subscribes to at least one of its
-// topics. A node that stops subscribing (it died) is no longer waited for, with a warning.
+// Lock-step (options.lockstep_nodes non-empty): after each message the player waits until every
+// named node is idle — everything the bus delivered to its subscribers has been acknowledged on
+// "<node>/ack" (node::Node::Spin acknowledges each input after its handler) — in two consecutive
+// registry snapshots that agree. A node publishes its outputs before acknowledging the input that
+// caused them, so this covers chains: name the downstream nodes too (e.g. /face_tracker and
+// /face_light) and the whole chain has finished with a frame before the next one is played. No
+// message is dropped however slow the nodes, and a replay through them is deterministic. Before
+// the first message the player waits until each named node is on the bus with a stable set of
+// subscriptions. A node that leaves the bus (it died) is not waited for, with a warning, until it
+// is back (respawned).
 #pragma once
 
 #include <atomic>
