@@ -1,31 +1,21 @@
-// Calibration files: ROS camera_info YAML and OpenCV FileStorage YAML/XML, written and read back,
-// scaling to another resolution, the order file > factory > default, and clear errors.
+// Capture's choice of intrinsics: calibration file > device factory values > field-of-view default,
+// scaling a file to another resolution of the same aspect ratio, and calibration file errors as
+// CaptureError(kBadInput). The files themselves are tested in common/calib.
 #include "probeless/capture/intrinsics.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
-#include <filesystem>
-#include <fstream>
-#include <opencv2/core.hpp>
+#include <cmath>
 
 #include "probeless/capture/capture_error.h"
+#include "probeless/testing/testing.h"
 
 namespace {
 
-namespace fs = std::filesystem;
 using namespace probeless;
 using namespace probeless::capture;
-
-class IntrinsicsTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("probeless_capture_k_" + std::to_string(getpid()));
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
-};
+using probeless::testing::TempDir;
+using probeless::testing::WriteText;
 
 Intrinsics Sample() {
   return {640,
@@ -38,41 +28,10 @@ Intrinsics Sample() {
           {0.1, -0.2, 0.001, 0.002, 0.05}};
 }
 
-TEST_F(IntrinsicsTest, RosYamlRoundTrip) {
-  const std::string path = (dir_ / "cam.yaml").string();
-  WriteCameraInfoYaml(path, Sample(), "webcam");
-  const Intrinsics k = ReadCalibrationFile(path);
-  EXPECT_EQ(k.width, 640u);
-  EXPECT_EQ(k.height, 480u);
-  EXPECT_DOUBLE_EQ(k.fx, 525.5);
-  EXPECT_DOUBLE_EQ(k.fy, 524.25);
-  EXPECT_DOUBLE_EQ(k.cx, 319.75);
-  EXPECT_DOUBLE_EQ(k.cy, 241.5);
-  EXPECT_EQ(k.model, msgs::DistortionModel::kPlumbBob);
-  ASSERT_EQ(k.distortion.size(), 5u);
-  EXPECT_DOUBLE_EQ(k.distortion[1], -0.2);
-}
-
-TEST_F(IntrinsicsTest, OpenCvFileStorageYamlAndXml) {
-  for (const char* name : {"cv.yml", "cv.xml"}) {
-    const std::string path = (dir_ / name).string();
-    {
-      cv::FileStorage fs(path, cv::FileStorage::WRITE);
-      fs << "image_width" << 640 << "image_height" << 480;
-      fs << "camera_matrix" << (cv::Mat_<double>(3, 3) << 500, 0, 320, 0, 501, 240, 0, 0, 1);
-      fs << "distortion_coefficients" << (cv::Mat_<double>(1, 5) << 0.1, 0.2, 0, 0, 0.3);
-    }
-    const Intrinsics k = ReadCalibrationFile(path);
-    EXPECT_DOUBLE_EQ(k.fx, 500) << name;
-    EXPECT_DOUBLE_EQ(k.fy, 501) << name;
-    EXPECT_EQ(k.width, 640u) << name;
-    EXPECT_EQ(k.model, msgs::DistortionModel::kPlumbBob) << name;
-  }
-}
-
-TEST_F(IntrinsicsTest, ResolveOrderAndScaling) {
-  const std::string path = (dir_ / "cam.yaml").string();
-  WriteCameraInfoYaml(path, Sample(), "webcam");
+TEST(IntrinsicsTest, ResolveOrderAndScaling) {
+  TempDir dir("probeless_capture_k");
+  const std::string path = dir.File("cam.yaml");
+  calib::WriteCameraInfoYaml(path, Sample(), "webcam");
   ResolvedIntrinsics r = ResolveIntrinsics(path, std::nullopt, 640, 480);
   EXPECT_TRUE(r.calibrated);
   EXPECT_EQ(r.source, "calibration file '" + path + "'");
@@ -83,6 +42,7 @@ TEST_F(IntrinsicsTest, ResolveOrderAndScaling) {
     ResolveIntrinsics(path, std::nullopt, 1280, 720);
     FAIL();
   } catch (const CaptureError& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
     EXPECT_EQ(std::string(e.what()),
               "calibration file '" + path +
                   "' is for 640x480 images, the camera delivers 1280x720: calibrate at this size "
@@ -99,22 +59,24 @@ TEST_F(IntrinsicsTest, ResolveOrderAndScaling) {
             "camera_info_url)");
 }
 
-TEST_F(IntrinsicsTest, BadFilesGiveOneLine) {
-  try {
-    ReadCalibrationFile((dir_ / "missing.yaml").string());
-    FAIL();
-  } catch (const CaptureError& e) {
-    EXPECT_EQ(std::string(e.what()), "calibration file '" + (dir_ / "missing.yaml").string() +
-                                         "' cannot be read (missing or not readable)");
-  }
-  const std::string path = (dir_ / "bad.yaml").string();
-  std::ofstream(path) << "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n";
-  try {
-    ReadCalibrationFile(path);
-    FAIL();
-  } catch (const CaptureError& e) {
-    EXPECT_EQ(std::string(e.what()),
-              "calibration file '" + path + "' has a camera matrix of 3 entries, expected 9 (3x3)");
+TEST(IntrinsicsTest, CalibrationErrorsAreBadInput) {
+  TempDir dir("probeless_capture_k");
+  const std::string missing = dir.File("missing.yaml");
+  const std::string bad = dir.File("bad.yaml");
+  WriteText(bad, "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n");
+  for (const auto& [path, fov, message] :
+       {std::tuple{missing, 60.0, "cannot read calibration file '" + missing + "'"},
+        std::tuple{bad, 60.0,
+                   "calibration file '" + bad + "': camera matrix has 3 entries, expected 9 (3x3)"},
+        std::tuple{std::string(), 200.0,
+                   std::string("field of view 200.000000 deg is outside (0, 180)")}}) {
+    try {
+      ResolveIntrinsics(path, std::nullopt, 640, 480, fov);
+      ADD_FAILURE() << message;
+    } catch (const CaptureError& e) {
+      EXPECT_EQ(e.kind(), ErrorKind::kBadInput);
+      EXPECT_EQ(std::string(e.what()), message);
+    }
   }
 }
 

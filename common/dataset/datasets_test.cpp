@@ -8,7 +8,6 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
-#include <random>
 
 #include "internal.h"
 #include "testing_util.h"
@@ -477,24 +476,24 @@ TEST(TumTest, FreiburgIntrinsicsAndCameraInfoOverrides) {
             "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0, 1]}\n");
   options.camera_info_path = ros;
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
-            "camera info '" + ros + "' is for 640x480 images, the dataset's are 40x30");
+            "calibration file '" + ros + "' is for 640x480 images, the dataset's are 40x30");
   WriteText(ros, "image_width: 40\n");
   EXPECT_EQ(
       ErrorOf([&] { OpenDataset(fr1.path, options); }),
-      "camera info '" + ros + "': missing camera_matrix (expected a ROS camera_info YAML file)");
+      "calibration file '" + ros + "': missing camera_matrix (expected a ROS camera_info YAML file)");
   WriteText(ros, "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0]}\n");
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
-            "camera info '" + ros + "': camera matrix has 8 entries, expected 9 (3x3)");
+            "calibration file '" + ros + "': camera matrix has 8 entries, expected 9 (3x3)");
   WriteText(ros,
             "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0, 1]}\n"
             "distortion_model: equidistant\n");
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
-            "camera info '" + ros +
+            "calibration file '" + ros +
                 "': distortion_model 'equidistant' is not supported (expected plumb_bob or "
                 "rational_polynomial)");
   options.camera_info_path = dir.File("absent.yaml");
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
-            "cannot read camera info '" + options.camera_info_path + "'");
+            "cannot read calibration file '" + options.camera_info_path + "'");
 }
 
 TEST(TumTest, MalformedListsAndMissingFiles) {
@@ -596,29 +595,6 @@ TEST(YaleBTest, LightDirectionsFollowTheCameraFrame) {
   expect_direction(0, -35, 0, std::sin(35 * kPi / 180), -std::cos(35 * kPi / 180));  // below
   expect_direction(45, 20, -std::sin(kPi / 4) * std::cos(kPi / 9), -std::sin(kPi / 9),
                    -std::cos(kPi / 4) * std::cos(kPi / 9));
-}
-
-TEST(YaleBTest, ShCoefficientsAreTheBasisAtTheLightDirection) {
-  std::mt19937 rng(1234);
-  std::normal_distribution<double> normal;
-  for (int trial = 0; trial < 20; ++trial) {
-    double v[3] = {normal(rng), normal(rng), normal(rng)};
-    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    const double x = v[0] / n, y = v[1] / n, z = v[2] / n;
-    const std::array<double, 9> sh = internal::ShBasis3(x, y, z);
-    const double k1 = std::sqrt(3 / (4 * kPi));
-    EXPECT_NEAR(sh[0], 1 / (2 * std::sqrt(kPi)), 1e-12);
-    EXPECT_NEAR(sh[1], -k1 * y, 1e-12);  // Y_1,-1 (Condon-Shortley sign)
-    EXPECT_NEAR(sh[2], k1 * z, 1e-12);   // Y_1,0
-    EXPECT_NEAR(sh[3], -k1 * x, 1e-12);  // Y_1,1
-    // Addition theorem: sum_m Y_lm(w)^2 = (2l + 1) / (4 pi).
-    double band2 = 0;
-    for (int i = 4; i < 9; ++i) band2 += sh[i] * sh[i];
-    EXPECT_NEAR(band2, 5 / (4 * kPi), 1e-12);
-    // Y_2,0 = sqrt(5 / (16 pi)) (3 z^2 - 1); Y_2,1 = -sqrt(15 / (4 pi)) x z.
-    EXPECT_NEAR(sh[6], std::sqrt(5 / (16 * kPi)) * (3 * z * z - 1), 1e-12);
-    EXPECT_NEAR(sh[7], -std::sqrt(15 / (4 * kPi)) * x * z, 1e-12);
-  }
 }
 
 TEST(YaleBTest, SubjectsThenAzimuthThenElevationWithLights) {
@@ -798,7 +774,7 @@ TEST(ImagesTest, Errors) {
             "<?xml version=\"1.0\"?>\n<opencv_storage>\n"
             "<image_width>20</image_width></opencv_storage>\n");
   EXPECT_EQ(ErrorOf([&] { OpenDataset(path, options); }),
-            "camera info '" + options.camera_info_path +
+            "calibration file '" + options.camera_info_path +
                 "': missing camera_matrix (or cameraMatrix, K) in OpenCV FileStorage file");
 }
 

@@ -2,10 +2,7 @@
 #pragma once
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
-#include <filesystem>
-#include <fstream>
 #include <functional>
 #include <optional>
 #include <string>
@@ -13,40 +10,17 @@
 
 #include "probeless/dataset/source.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/testing/testing.h"
 
 namespace probeless::dataset::testing {
 
-// A fresh directory for one test, removed at the end.
-class TempDir {
+// A fresh directory for one test, removed at the end (path(), File(name)).
+class TempDir : public probeless::testing::TempDir {
  public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
-    for (char& c : name) {
-      if (c == '/') c = '_';
-    }
-    path_ = std::filesystem::path(::testing::TempDir()) /
-            ("probeless_dataset_" + std::to_string(::getpid()) + "_" + name);
-    std::filesystem::remove_all(path_);
-    std::filesystem::create_directories(path_);
-  }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  const std::string path() const { return path_.string(); }
-  // `name` under the directory, creating its parent folders.
-  std::string File(const std::string& name) const {
-    const std::filesystem::path file = path_ / name;
-    std::filesystem::create_directories(file.parent_path());
-    return file.string();
-  }
-
- private:
-  std::filesystem::path path_;
+  TempDir() : probeless::testing::TempDir("probeless_dataset") {}
 };
 
-inline void WriteText(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-}
+using probeless::testing::WriteText;
 
 // Every message of one pass.
 inline std::vector<StreamMessage> Drain(Source& source) {

@@ -1,23 +1,18 @@
 // Process test of the example nodes: bin/talker and bin/listener talk over the bus, honour their
 // params and remaps, stop cleanly on SIGINT with a summary, and leave nothing in /dev/shm.
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "probeless/bus/bus.h"
-
-extern char** environ;
+#include "probeless/testing/testing.h"
 
 namespace {
 
@@ -26,67 +21,7 @@ using namespace std::chrono_literals;
 // Expectations below assume the default log level: ignore the developer's environment.
 [[maybe_unused]] const bool kEnvironmentCleared = (unsetenv("PROBELESS_LOG_LEVEL"), true);
 
-// A child process whose stdout and stderr go to files.
-class Process {
- public:
-  Process(const std::string& exe, std::vector<std::string> args) {
-    static int counter = 0;
-    const std::string base =
-        "/tmp/probeless_tl_" + std::to_string(getpid()) + "_" + std::to_string(counter++);
-    out_path_ = base + ".out";
-    err_path_ = base + ".err";
-    args.insert(args.begin(), std::string(PROBELESS_BIN_DIR) + "/" + exe);
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out_path_.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err_path_.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    const int rc = posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    EXPECT_EQ(rc, 0) << "cannot start " << argv[0];
-  }
-  ~Process() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      Wait();
-    }
-    std::filesystem::remove(out_path_);
-    std::filesystem::remove(err_path_);
-  }
-  void Signal(int signal_number) const { kill(pid_, signal_number); }
-  // Waits for the exit (at most `timeout`, then SIGKILL) and returns the exit code (-1 if killed).
-  int Wait(std::chrono::milliseconds timeout = 10s) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    int status = 0;
-    while (waitpid(pid_, &status, WNOHANG) == 0) {
-      if (std::chrono::steady_clock::now() > deadline) {
-        kill(pid_, SIGKILL);
-        waitpid(pid_, &status, 0);
-        break;
-      }
-      std::this_thread::sleep_for(5ms);
-    }
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  }
-  std::string Out() const { return Read(out_path_); }
-  std::string Err() const { return Read(err_path_); }
-
- private:
-  static std::string Read(const std::string& path) {
-    std::ifstream in(path);
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-  }
-  pid_t pid_ = -1;
-  std::string out_path_;
-  std::string err_path_;
-};
+using probeless::testing::Process;
 
 std::vector<std::string> Segments() {
   const std::string prefix =

@@ -1,19 +1,15 @@
 // Process test of bin/recorder: records topics published from this test, SIGINT/SIGTERM close the
 // file (footer written, not truncated), the drop report is printed, bad options exit 2 with one
 // line.
-#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
-#include <spawn.h>
 #include <stdlib.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -22,8 +18,7 @@
 #include "probeless/log/mcap_reader.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/image.h"
-
-extern char** environ;
+#include "probeless/testing/testing.h"
 
 namespace {
 
@@ -37,67 +32,7 @@ namespace msgs = probeless::msgs;
 constexpr uint32_t kWidth = 32;
 constexpr uint32_t kHeight = 24;
 
-// A child process whose stdout and stderr go to files.
-class Process {
- public:
-  Process(const std::string& exe, std::vector<std::string> args) {
-    static int counter = 0;
-    const std::string base =
-        "/tmp/probeless_rec_" + std::to_string(getpid()) + "_" + std::to_string(counter++);
-    out_path_ = base + ".out";
-    err_path_ = base + ".err";
-    args.insert(args.begin(), std::string(PROBELESS_BIN_DIR) + "/" + exe);
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out_path_.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err_path_.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0600);
-    const int rc = posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    EXPECT_EQ(rc, 0) << "cannot start " << argv[0];
-  }
-  ~Process() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      Wait();
-    }
-    std::filesystem::remove(out_path_);
-    std::filesystem::remove(err_path_);
-  }
-  void Signal(int signal_number) const { kill(pid_, signal_number); }
-  // Waits for the exit (at most `timeout`, then SIGKILL) and returns the exit code (-1 if killed).
-  int Wait(std::chrono::milliseconds timeout = 20s) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    int status = 0;
-    while (waitpid(pid_, &status, WNOHANG) == 0) {
-      if (std::chrono::steady_clock::now() > deadline) {
-        kill(pid_, SIGKILL);
-        waitpid(pid_, &status, 0);
-        break;
-      }
-      std::this_thread::sleep_for(5ms);
-    }
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  }
-  std::string Out() const { return Read(out_path_); }
-  std::string Err() const { return Read(err_path_); }
-
- private:
-  static std::string Read(const std::string& path) {
-    std::ifstream in(path);
-    std::stringstream text;
-    text << in.rdbuf();
-    return text.str();
-  }
-  pid_t pid_ = -1;
-  std::string out_path_;
-  std::string err_path_;
-};
+using probeless::testing::Process;
 
 bool WaitFor(const std::function<bool()>& done) {
   const auto deadline = std::chrono::steady_clock::now() + 20s;
@@ -181,7 +116,7 @@ TEST_F(RecorderNodeTest, CommandLineRecordingStopsCleanlyOnSigintWithReport) {
     PublishImage(other, msgs::Encoding::kMono8, i);
   }
   recorder.Signal(SIGINT);  // what is still queued on the bus is recorded before closing
-  ASSERT_EQ(recorder.Wait(), 0) << recorder.Err();
+  ASSERT_EQ(recorder.Wait(20s), 0) << recorder.Err();
   EXPECT_EQ(other.SubscriberCount(), 0u);
   const uint64_t image_bytes = ExpectRecorded(file, "/rec/image", 30);
   const uint64_t depth_bytes = ExpectRecorded(file, "/rec/depth", 30);
@@ -208,7 +143,7 @@ TEST_F(RecorderNodeTest, ParamsSplitBySizeAndSigterm) {
   ASSERT_TRUE(WaitFor([&] { return rgb.SubscriberCount() == 1; })) << recorder.Err();
   for (uint64_t i = 1; i <= 40; ++i) PublishImage(rgb, msgs::Encoding::kRgb8, i);
   recorder.Signal(SIGTERM);
-  ASSERT_EQ(recorder.Wait(), 0) << recorder.Err();
+  ASSERT_EQ(recorder.Wait(20s), 0) << recorder.Err();
   const std::string out = recorder.Out();
   EXPECT_EQ(out.rfind("/p/image: received=40 dropped=0 invalid=0 bytes=", 0), 0u) << out;
   // Every file is complete; their union is messages 1..40 in order.
@@ -232,7 +167,7 @@ TEST_F(RecorderNodeTest, ParamsSplitBySizeAndSigterm) {
 // Runs the recorder with `args`; expects exit 2 and exactly `error` on stderr.
 void ExpectUsageError(std::vector<std::string> args, const std::string& error) {
   Process recorder("recorder", std::move(args));
-  EXPECT_EQ(recorder.Wait(), 2);
+  EXPECT_EQ(recorder.Wait(20s), 2);
   EXPECT_EQ(recorder.Err(), "[error] [/recorder] " + error + "\n");
   EXPECT_EQ(recorder.Out(), "");
 }
@@ -261,7 +196,7 @@ TEST_F(RecorderNodeTest, BadOptionsExitTwoWithOneLine) {
 
 TEST_F(RecorderNodeTest, HelpPrintsUsage) {
   Process recorder("recorder", {"--help"});
-  EXPECT_EQ(recorder.Wait(), 0);
+  EXPECT_EQ(recorder.Wait(20s), 0);
   EXPECT_EQ(recorder.Out().rfind("usage: recorder ", 0), 0u) << recorder.Out();
 }
 

@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "probeless/capture/intrinsics.h"
+#include "probeless/calib/calibration.h"
 #include "probeless/msgs/image.h"
 #include "probeless/node/node.h"
 
@@ -118,7 +118,7 @@ int Run(int argc, char** argv) {
   std::vector<cv::Mat> rvecs, tvecs;
   const double rms =
       cv::calibrateCamera(object_points, image_points, image_size, k, d, rvecs, tvecs);
-  capture::Intrinsics intrinsics;
+  calib::Intrinsics intrinsics;
   intrinsics.width = static_cast<uint32_t>(image_size.width);
   intrinsics.height = static_cast<uint32_t>(image_size.height);
   intrinsics.fx = k.at<double>(0, 0);
@@ -127,7 +127,7 @@ int Run(int argc, char** argv) {
   intrinsics.cy = k.at<double>(1, 2);
   intrinsics.model = msgs::DistortionModel::kPlumbBob;
   for (int i = 0; i < 5; ++i) intrinsics.distortion.push_back(d.at<double>(0, i));
-  capture::WriteCameraInfoYaml(out, intrinsics, name);
+  calib::WriteCameraInfoYaml(out, intrinsics, name);
   std::printf(
       "calibrate: %zu views, RMS reprojection error %.3f px, fx %.2f fy %.2f cx %.2f cy %.2f -> "
       "%s\n",

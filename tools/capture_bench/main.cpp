@@ -89,8 +89,8 @@ int main(int argc, char** argv) {
   figures.push_back(
       Time("kinect11_to_depth16_mm", iterations, [&] { ConvertFrame(k, image, slot); }));
   std::vector<uint16_t> depth(w * h, 1500), registered(w * h);
-  const Intrinsics dk = IntrinsicsFromFieldOfView(w, h, 58);
-  const Intrinsics ck = IntrinsicsFromFieldOfView(w, h, 62);
+  const Intrinsics dk = calib::IntrinsicsFromFieldOfView(w, h, 58);
+  const Intrinsics ck = calib::IntrinsicsFromFieldOfView(w, h, 62);
   DepthToColour extrinsics;
   extrinsics.translation_m = {-0.025, 0, 0};
   figures.push_back(Time("software_registration_depth16", iterations / 4 + 1, [&] {

@@ -80,7 +80,7 @@ void FramePublisher::PublishInfo(int64_t stamp_mono_ns, uint64_t sequence) {
   if (camera_info_ == nullptr) return;
   bus::Loan loan = camera_info_->Borrow(sizeof(msgs::CameraInfo));
   msgs::WriteView<msgs::CameraInfo> out = msgs::WriteMessage<msgs::CameraInfo>(loan.data());
-  FillCameraInfo(intrinsics_, depth_scale_, *out);
+  calib::FillCameraInfo(intrinsics_, depth_scale_, *out);
   out->header.stamp_mono_ns = stamp_mono_ns;
   out->header.stamp_ns = RealtimeFromMonotonic(stamp_mono_ns);
   out->header.sequence = sequence;

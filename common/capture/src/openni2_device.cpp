@@ -202,7 +202,7 @@ class OpenNi2Device final : public Device {
       f.format = PixelFormat::kDepthMm;
       if (software_registration_) {
         RegisterDepthToColour(reinterpret_cast<const uint16_t*>(f.data.data()), f.stride,
-                              ScaleIntrinsics(depth_k_, f.width, f.height), colour_k_,
+                              calib::ScaleIntrinsics(depth_k_, f.width, f.height), colour_k_,
                               options_.depth_to_colour, registered_depth_.data(),
                               colour_->width * 2);
         f.width = colour_->width;
@@ -263,8 +263,8 @@ class OpenNi2Device final : public Device {
                                           uint32_t height) {
     const double hfov = stream.getHorizontalFieldOfView();
     const double vfov = stream.getVerticalFieldOfView();
-    Intrinsics k = IntrinsicsFromFieldOfView(width, height,
-                                             hfov > 0.1 && hfov < 3.0 ? hfov * 180 / M_PI : 58.0);
+    Intrinsics k = calib::IntrinsicsFromFieldOfView(
+        width, height, hfov > 0.1 && hfov < 3.0 ? hfov * 180 / M_PI : 58.0);
     if (vfov > 0.1 && vfov < 3.0) k.fy = height / (2 * std::tan(vfov / 2));
     return k;
   }

@@ -84,7 +84,7 @@ std::unique_ptr<Source> OpenImages(const std::string& path, const DatasetOptions
   const auto width = static_cast<uint32_t>(first.cols);
   const auto height = static_cast<uint32_t>(first.rows);
   const Intrinsics intrinsics =
-      ResolveIntrinsics(options, GuessIntrinsics(width, height), width, height);
+      ResolveIntrinsics(options, calib::IntrinsicsFromFieldOfView(width, height), width, height);
   return std::make_unique<ImagesSource>(path, options, std::move(files), encoding, intrinsics,
                                         first.size());
 }

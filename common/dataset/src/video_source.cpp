@@ -113,7 +113,7 @@ std::unique_ptr<Source> OpenVideo(const std::string& path, const DatasetOptions&
   const auto width = static_cast<uint32_t>(first.cols);
   const auto height = static_cast<uint32_t>(first.rows);
   const Intrinsics intrinsics =
-      ResolveIntrinsics(options, GuessIntrinsics(width, height), width, height);
+      ResolveIntrinsics(options, calib::IntrinsicsFromFieldOfView(width, height), width, height);
   return std::make_unique<VideoSource>(path, options, fps, intrinsics, first.size(),
                                        options.max_frames);
 }

@@ -1,4 +1,5 @@
-// Private: Extended Yale Face Database B file names, light directions and SH coefficients.
+// Private: Extended Yale Face Database B file names and light directions (the SH coefficients of
+// the light are probeless_sh's).
 #pragma once
 
 #include <array>
@@ -20,12 +21,8 @@ std::optional<YaleBName> ParseYaleBName(std::string_view file_name);
 
 // Unit vector from the face towards the light in the camera frame (x right, y down, z forward,
 // the subject facing the camera) for azimuth A (positive = light from the subject's right = image
-// left) and elevation E (positive = above): (-sin A cos E, -sin E, -cos A cos E).
+// left) and elevation E (positive = above), in degrees: sh::DirectionFromAzimuthElevation,
+// (-sin A cos E, -sin E, -cos A cos E).
 std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_deg);
-
-// The 9 real orthonormal SH basis functions (Condon-Shortley phase, index l(l+1)+m) of bands 0..2
-// at unit direction (x, y, z): the coefficients of a directional light of radiance integral 1
-// arriving from that direction.
-std::array<double, 9> ShBasis3(double x, double y, double z);
 
 }  // namespace probeless::dataset::internal

@@ -12,6 +12,7 @@
 #include "image_io.h"
 #include "internal.h"
 #include "probeless/msgs/sh_light.h"
+#include "probeless/sh/sh.h"
 #include "yaleb.h"
 
 namespace probeless::dataset::internal {
@@ -58,27 +59,8 @@ std::optional<YaleBName> ParseYaleBName(std::string_view name) {
 }
 
 std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_deg) {
-  const double a = azimuth_deg * std::numbers::pi / 180;
-  const double e = elevation_deg * std::numbers::pi / 180;
-  return {-std::sin(a) * std::cos(e), -std::sin(e), -std::cos(a) * std::cos(e)};
-}
-
-std::array<double, 9> ShBasis3(double x, double y, double z) {
-  const double pi = std::numbers::pi;
-  const double c0 = 0.5 * std::sqrt(1 / pi);     // 0.282095
-  const double c1 = std::sqrt(3 / (4 * pi));     // 0.488603
-  const double c2 = 0.5 * std::sqrt(15 / pi);    // 1.092548
-  const double c20 = 0.25 * std::sqrt(5 / pi);   // 0.315392
-  const double c22 = 0.25 * std::sqrt(15 / pi);  // 0.546274
-  return {c0,
-          -c1 * y,
-          c1 * z,
-          -c1 * x,
-          c2 * x * y,
-          -c2 * y * z,
-          c20 * (3 * z * z - 1),
-          -c2 * x * z,
-          c22 * (x * x - y * y)};
+  constexpr double kDeg = std::numbers::pi / 180;
+  return sh::DirectionFromAzimuthElevation(azimuth_deg * kDeg, elevation_deg * kDeg);
 }
 
 namespace {
@@ -135,10 +117,11 @@ class YaleBSource : public FrameSource {
     FillHeader(light->header, stamp, sequence, frame_id);
     const std::array<double, 3> d =
         YaleBLightDirection(face.name.azimuth_deg, face.name.elevation_deg);
-    const std::array<double, 9> sh = ShBasis3(d[0], d[1], d[2]);
+    // A directional light of radiance integral 1: the basis at its direction (sh.h).
+    const std::array<double, 9> coefficients = sh::Basis9(d);
     light->bands = 3;
-    for (size_t i = 0; i < sh.size(); ++i) {
-      for (int c = 0; c < 3; ++c) light->coefficients[i][c] = static_cast<float>(sh[i]);
+    for (size_t i = 0; i < coefficients.size(); ++i) {
+      for (int c = 0; c < 3; ++c) light->coefficients[i][c] = static_cast<float>(coefficients[i]);
     }
     for (int k = 0; k < 3; ++k) light->dominant_direction[k] = static_cast<float>(d[k]);
     light->intensity = 1;

@@ -2,7 +2,6 @@
 #pragma once
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstddef>
@@ -18,28 +17,18 @@
 
 #include "probeless/log/mcap_reader.h"
 #include "probeless/log/mcap_writer.h"
+#include "probeless/testing/testing.h"
 
 namespace probeless::log::testing {
 
-// A fresh directory for one test, removed at the end.
-class TempDir {
+// A fresh directory for one test, removed at the end (path(), File(name)).
+class TempDir : public probeless::testing::TempDir {
  public:
-  TempDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
-    for (char& c : name) {
-      if (c == '/') c = '_';
-    }
-    path_ = std::filesystem::path(::testing::TempDir()) /
-            ("probeless_log_" + std::to_string(::getpid()) + "_" + name);
-    std::filesystem::remove_all(path_);
-    std::filesystem::create_directories(path_);
+  TempDir() : probeless::testing::TempDir("probeless_log") {}
+  // `name` under the directory; parent folders are NOT created (tests write to missing folders).
+  std::string File(const std::string& name) const {
+    return (std::filesystem::path(path()) / name).string();
   }
-  ~TempDir() { std::filesystem::remove_all(path_); }
-  std::string File(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  std::filesystem::path path_;
 };
 
 inline std::vector<std::byte> ReadFileBytes(const std::string& path) {

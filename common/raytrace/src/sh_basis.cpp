@@ -4,20 +4,14 @@
 #include <numbers>
 
 #include "probeless/raytrace/render.h"
+#include "probeless/sh/sh.h"
 
 namespace probeless::raytrace {
 
 std::array<float, 9> ShBasis9(Vec3 d) {
-  const float x = d.x, y = d.y, z = d.z;
-  return {0.28209479177387814f,
-          -0.4886025119029199f * y,
-          0.4886025119029199f * z,
-          -0.4886025119029199f * x,
-          1.0925484305920792f * x * y,
-          -1.0925484305920792f * y * z,
-          0.31539156525252005f * (3 * z * z - 1),
-          -1.0925484305920792f * x * z,
-          0.5462742152960396f * (x * x - y * y)};
+  std::array<float, 9> y{};
+  sh::EvaluateBasis<float>(3, d.x, d.y, d.z, y.data());
+  return y;
 }
 
 namespace internal {

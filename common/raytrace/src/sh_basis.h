@@ -1,6 +1,5 @@
-// Private band 0..2 SH helpers (msgs/sh_light.h convention). common/sh (probeless_sh) did not
-// build when this library was written; these nine polynomials match its table in
-// docs/messages.md and are checked by raytrace_test against the analytic constants.
+// Private band 0..2 SH helpers (msgs/sh_light.h convention): the basis is probeless_sh's
+// (sh::EvaluateBasis); raytrace_test checks it against the analytic constants.
 #pragma once
 
 #include <array>
