@@ -1,0 +1,277 @@
+// Unit tests of probeless_face_track on synthetic input: bad model paths, the generic 3-D model
+// and head pose, sampling validity cases, SH rotation, the light smoother following an on/off step
+// within 3 frames, and the JSON layouts.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/model.h"
+#include "probeless/face_track/face_tracker.h"
+#include "probeless/face_track/head_model.h"
+#include "probeless/face_track/light_output.h"
+#include "probeless/face_track/sampling.h"
+#include "probeless/sh/sh.h"
+
+namespace {
+
+using namespace probeless;
+using namespace probeless::face_track;
+namespace fl = probeless::face_light;
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(FaceTracker, BadModelPathsAreClearErrors) {
+  TrackerOptions o;
+  o.shape_predictor_path = "/nonexistent/sp.dat";
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
+            "shape predictor model '/nonexistent/sp.dat' not found (install the Debian package "
+            "libdlib-data, or set shape_predictor_path)");
+  o = {};
+  o.backend = DetectorBackend::kHaar;
+  o.haar_cascade_path = "/nonexistent/haar.xml";
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
+            "Haar cascade model '/nonexistent/haar.xml' not found (install the Debian package "
+            "opencv-data, or set haar_cascade_path)");
+  o = {};
+  o.backend = DetectorBackend::kYuNet;
+  o.yunet_model_path = "/nonexistent/yunet.onnx";
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
+            "YuNet model '/nonexistent/yunet.onnx' not found (set yunet_model_path to an ONNX "
+            "YuNet model)");
+  EXPECT_EQ(ErrorOf([] { BackendFromName("mtcnn"); }),
+            "unknown face detector backend 'mtcnn' (expected dlib, yunet or haar)");
+  o = {};
+  o.redetect_period = 0;
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "redetect_period must be >= 1");
+}
+
+// Projects the generic model with a known pose; EstimateHeadPose recovers it.
+TEST(HeadModel, PoseFromProjectedGenericModel) {
+  const double angle = 0.3;  // yaw about y
+  HeadPose truth;
+  truth.rotation = {std::cos(angle),  0, std::sin(angle), 0, 1, 0,
+                    -std::sin(angle), 0, std::cos(angle)};
+  truth.translation = {0.05, -0.02, 0.6};
+  std::vector<Point2f> pixels(kLandmarkCount);
+  for (int i = 0; i < kLandmarkCount; ++i) {
+    const auto& p = kGenericLandmarksMm[i];
+    double c[3];
+    for (int a = 0; a < 3; ++a) {
+      c[a] = truth.rotation[3 * a] * p[0] * 1e-3 + truth.rotation[3 * a + 1] * p[1] * 1e-3 +
+             truth.rotation[3 * a + 2] * p[2] * 1e-3 + truth.translation[a];
+    }
+    pixels[i] = {static_cast<float>(500 * c[0] / c[2] + 320),
+                 static_cast<float>(500 * c[1] / c[2] + 240)};
+  }
+  double rms = 1;
+  const HeadPose pose = EstimateHeadPose(pixels, 500, 500, 320, 240, {}, &rms);
+  ASSERT_TRUE(pose.valid);
+  EXPECT_LT(rms, 0.01);
+  for (int i = 0; i < 9; ++i) EXPECT_NEAR(pose.rotation[i], truth.rotation[i], 1e-3);
+  for (int i = 0; i < 3; ++i) EXPECT_NEAR(pose.translation[i], truth.translation[i], 1e-3);
+  // Eye centres of the table are at x = +-32 mm, y = 1 mm (the crop's proportions).
+  double rx = 0, lx = 0;
+  for (int i = 0; i < 6; ++i) {
+    rx += kGenericLandmarksMm[36 + i][0] / 6;
+    lx += kGenericLandmarksMm[42 + i][0] / 6;
+  }
+  EXPECT_NEAR(rx, -32, 0.01);
+  EXPECT_NEAR(lx, 32, 0.01);
+  // Quaternion round trip.
+  const auto q = QuaternionFromMatrix(truth.rotation);
+  const auto m = MatrixFromQuaternion(q);
+  for (int i = 0; i < 9; ++i) EXPECT_NEAR(m[i], truth.rotation[i], 1e-12);
+}
+
+// A model with a few samples over the face, a frontal track whose landmarks put the canonical crop
+// at 2x scale, offset (100, 50).
+struct Fixture {
+  fl::FaceLightModel model;
+  FaceTrack track;
+  Fixture() {
+    for (double v : {0.3, 0.5, 0.7}) {
+      for (double u : {0.3, 0.4, 0.5, 0.6, 0.7}) {
+        model.positions.push_back({u, v});
+        model.rtf.push_back({0.5f, 0, 0, -0.3f, 0, 0, 0, 0, 0});
+        model.residual_rms.push_back(0.01f);
+      }
+    }
+    model.patch_radius_px = 2;
+    model.intensity_exponent = 1;
+    track.found = true;
+    // Landmarks whose CanonicalLandmarks combos are kTrackerCanonical mapped by 2x + (100, 50).
+    for (auto& p : track.landmarks) p = {0, 0};
+    auto map = [](fl::Point2 c) { return Point2f{float(2 * c.x + 100), float(2 * c.y + 50)}; };
+    for (int i = 36; i < 42; ++i) track.landmarks[i] = map(kTrackerCanonical[0]);
+    for (int i = 42; i < 48; ++i) track.landmarks[i] = map(kTrackerCanonical[1]);
+    track.landmarks[30] = map(kTrackerCanonical[2]);
+    for (int i = 60; i < 68; ++i) track.landmarks[i] = map(kTrackerCanonical[3]);
+    track.pose.valid = true;
+    track.pose.translation = {0, 0, 0.5};
+  }
+};
+
+TEST(Sampling, ValidityCases) {
+  Fixture f;
+  const int w = 600, h = 500;
+  std::vector<uint8_t> image(static_cast<size_t>(w) * h, 120);
+  SamplerOptions o;
+  FaceSampler sampler(f.model, o);
+  const ImageView view{image.data(), w, h, static_cast<size_t>(w), PixelFormat::kGray};
+  FaceSamples s = sampler.Sample(view, f.track);
+  ASSERT_EQ(s.count, 15);
+  EXPECT_EQ(s.ValidCount(), 15);
+  EXPECT_NEAR(s.crop_to_image.Scale(), 2, 1e-6);
+  EXPECT_NEAR(s.rgb[0], 120 / 255.0, 1e-6);
+  EXPECT_NEAR(s.quality, 1, 1e-6);
+  // Sample 7 (centre): saturated pixel; sample 0: a bright outlier among its neighbours; sample 14:
+  // dark.
+  auto paint = [&](int i, uint8_t value, int radius) {
+    const int x = static_cast<int>(std::lround(s.image_points[2 * i]));
+    const int y = static_cast<int>(std::lround(s.image_points[2 * i + 1]));
+    for (int dy = -radius; dy <= radius; ++dy) {
+      for (int dx = -radius; dx <= radius; ++dx) image[(y + dy) * w + x + dx] = value;
+    }
+  };
+  paint(7, 255, 0);
+  paint(0, 250, 4);
+  paint(14, 1, 4);
+  s = sampler.Sample(view, f.track);
+  EXPECT_EQ(s.flags[7], kSaturated);
+  EXPECT_EQ(s.flags[0], kInconsistent);
+  EXPECT_EQ(s.flags[14], kTooDark);
+  EXPECT_EQ(s.ValidCount(), 12);
+  // Off the image: shift the face left by 250 px.
+  FaceTrack shifted = f.track;
+  for (auto& p : shifted.landmarks) p.x -= 250;
+  s = sampler.Sample(view, shifted);
+  EXPECT_TRUE(s.flags[0] & kOutsideImage);
+  // Turned away: yaw 90 degrees -> samples on the face's right side face away.
+  FaceTrack turned = f.track;
+  turned.pose.rotation = {0, 0, 1, 0, 1, 0, -1, 0, 0};
+  s = sampler.Sample(view, turned);
+  int away = 0;
+  for (int i = 0; i < s.count; ++i) away += (s.flags[i] & kFacingAway) != 0;
+  EXPECT_GT(away, 0);
+  // Frontal normals point towards the camera (-z).
+  s = sampler.Sample(view, f.track);
+  EXPECT_LT(s.normals[3 * 7 + 2], -0.8);
+}
+
+TEST(LightOutput, RotateSh9MatchesRotatedDirectionalLight) {
+  const sh::Vec3 d{0.3, -0.5, std::sqrt(1 - 0.34)};
+  const auto y = sh::Basis9(d);
+  Sh9Rgb c{};
+  for (int n = 0; n < 9; ++n) c[n] = {float(y[n]), float(2 * y[n]), float(3 * y[n])};
+  const std::array<double, 9> r{0, -1, 0, 1, 0, 0, 0, 0, 1};  // 90 deg about z
+  const Sh9Rgb rotated = RotateSh9(c, r);
+  const sh::Vec3 rd{-d[1], d[0], d[2]};
+  const auto yr = sh::Basis9(rd);
+  for (int n = 0; n < 9; ++n) {
+    EXPECT_NEAR(rotated[n][0], yr[n], 1e-5);
+    EXPECT_NEAR(rotated[n][2], 3 * yr[n], 1e-5);
+  }
+}
+
+fl::LightEstimate Light(double power, const sh::Vec3& d) {
+  fl::LightEstimate e;
+  e.channels = 3;
+  e.confidence = 0.8f;
+  const auto y = sh::Basis9(d);
+  for (int n = 0; n < 9; ++n) {
+    const float v = static_cast<float>(power * y[n] + (n == 0 ? 0.2 : 0));
+    e.coefficients[n] = {v, v, v};
+  }
+  const sh::Vec3 od = sh::OptimalLinearDirection(&y[0]);
+  e.dominant_direction = {float(od[0]), float(od[1]), float(od[2])};
+  e.intensity = static_cast<float>(power);
+  return e;
+}
+
+// A lamp switched on (frames 10..19) then off: the smoothed light is within 10 % of the new
+// steady state within 3 frames of each switch, and it smooths frame-to-frame noise.
+TEST(LightSmoother, FollowsAnOnOffStepWithin3Frames) {
+  LightSmoother smoother;
+  const sh::Vec3 up{0, -1, 0}, side{0.8, 0, -0.6};
+  auto scene = [&](int frame, double noise) {
+    fl::LightEstimate e = Light(1.0, up);
+    if (frame >= 10 && frame < 20) {
+      const fl::LightEstimate lamp = Light(2.0, side);
+      for (int n = 0; n < 9; ++n) {
+        for (int c = 0; c < 3; ++c)
+          e.coefficients[n][c] += lamp.coefficients[n][c] - (n == 0 ? 0.2f : 0);
+      }
+    }
+    for (int c = 0; c < 3; ++c) e.coefficients[2][c] += static_cast<float>(noise);
+    return e;
+  };
+  auto error = [&](const fl::LightEstimate& a, const fl::LightEstimate& b) {
+    double num = 0, den = 0;
+    for (int n = 0; n < 9; ++n) {
+      num += (a.coefficients[n][0] - b.coefficients[n][0]) *
+             (a.coefficients[n][0] - b.coefficients[n][0]);
+      den += b.coefficients[n][0] * b.coefficients[n][0];
+    }
+    return std::sqrt(num / den);
+  };
+  for (int frame = 0; frame < 30; ++frame) {
+    const double noise = (frame % 2 ? 0.02 : -0.02);
+    const fl::LightEstimate out = smoother.Update(scene(frame, noise));
+    const fl::LightEstimate clean = scene(frame, 0);
+    const int since_switch = frame < 10 ? frame : (frame < 20 ? frame - 10 : frame - 20);
+    if (since_switch >= 2) {  // the 3rd frame after the switch (0-based 2) at the latest
+      EXPECT_LT(error(out, clean), 0.1) << "frame " << frame;
+    }
+    if (since_switch >= 5) {  // steady state: the noise is attenuated
+      EXPECT_LT(std::abs(out.coefficients[2][0] - clean.coefficients[2][0]), 0.015) << frame;
+    }
+  }
+  // Switched off: plain exponential smoothing would need ~7 frames to get within 10 %.
+  SmootherOptions plain;
+  plain.change_threshold = 1e9;
+  LightSmoother slow(plain);
+  fl::LightEstimate out;
+  for (int frame = 0; frame < 23; ++frame) out = slow.Update(scene(frame, 0));
+  EXPECT_GT(error(out, scene(22, 0)), 0.1);
+}
+
+TEST(LightOutput, JsonLayouts) {
+  Sh9Rgb c{};
+  for (int n = 0; n < 9; ++n) c[n] = {float(n + 1), float(10 * (n + 1)), float(100 * (n + 1))};
+  const Sh9Rgb y = ToYUpFrame(c);
+  // diag(1, -1, -1) then no Condon-Shortley phase: n = 0 (1), 1 (y: -1 then -1 -> +),
+  // 2 (z: -1), 3 (x: +1 then -1 -> -).
+  EXPECT_NEAR(y[0][0], 1, 1e-5);
+  EXPECT_NEAR(y[1][0], 2, 1e-4);
+  EXPECT_NEAR(y[2][0], -3, 1e-4);
+  EXPECT_NEAR(y[3][0], -4, 1e-4);
+  const std::string json = LightJson(c, {0, 0, -1}, 2.5f, 0.75f, LightColour(c), 42, "camera");
+  EXPECT_EQ(json.rfind("{\"stamp_ns\":42,\"frame_id\":\"camera\",\"confidence\":0.75,"
+                       "\"intensity\":2.5,\"dominant_direction\":[0,0,-1],",
+                       0),
+            0u)
+      << json;
+  // ARKit: planar, R plane first: [[R0..R8],[G0..G8],[B0..B8]].
+  EXPECT_NE(json.find("\"arkit\":{\"sphericalHarmonicsCoefficients\":[[1,2,-3,-4,"),
+            std::string::npos)
+      << json;
+  EXPECT_NE(json.find("],[10,20,-30,-40,"), std::string::npos) << json;
+  // WebXR: interleaved R0 G0 B0 R1 G1 B1 ...
+  EXPECT_NE(
+      json.find("\"webxr\":{\"sphericalHarmonicsCoefficients\":[1,10,100,2,20,200,-3,-30,-300,"),
+      std::string::npos)
+      << json;
+  const auto colour = LightColour(c);
+  EXPECT_NEAR(colour[0] + colour[1] + colour[2], 3, 1e-5);
+}
+
+}  // namespace

@@ -1,0 +1,164 @@
+// face_light: light estimation from face observations (Knorr & Kurz 2014, eq. 19) with the
+// face_light estimator, rotated from the face frame into the camera frame by the head pose,
+// optionally smoothed, exported as JSON (docs/face_light.md, "face_light node").
+//
+// Subscribes `face/observation` (msgs::FaceObservation); publishes `face/light` (msgs::ShLight,
+// header and frame of the observation = the camera frame) for every observation with a face and
+// enough valid samples. A lock-step player can name this node although it subscribes no played
+// topic: the player waits until the whole chain is idle (docs/replay.md).
+//
+// Params: model (default data/face_light/default_model.txt, resolved like face_tracker's
+// sample_model), mode (rgb | gray), back_prior (0.1), ridge, robust, non_negative, weight_floor,
+// smoothing (true), smoothing_alpha (0.3), change_threshold (0.35), json_path ("" = none),
+// json_mode (frame: one JSON line per estimate appended to json_path | exit: the last estimate
+// written on exit).
+// Exit: 0 on SIGINT/SIGTERM, 2 on bad params or model (one line on stderr), 1 otherwise.
+#include "probeless/node/main.h"
+
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+
+#include "probeless/face_light/estimator.h"
+#include "probeless/face_light/model.h"
+#include "probeless/face_track/face_tracker.h"
+#include "probeless/face_track/head_model.h"
+#include "probeless/face_track/light_output.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+
+namespace {
+
+using namespace probeless;
+namespace ft = probeless::face_track;
+namespace fl = probeless::face_light;
+
+std::string ResolveModel(const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty() || fs::path(path).is_absolute() || fs::exists(path)) return path;
+  for (const std::string base : {PROBELESS_SOURCE_TREE, PROBELESS_INSTALL_DATA}) {
+    const fs::path candidate = fs::path(base) / path;
+    if (fs::exists(candidate)) return candidate.string();
+  }
+  return path;
+}
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "face_light");
+  const std::string model_path =
+      ResolveModel(node.Param("model", "data/face_light/default_model.txt"));
+  const std::string mode = node.Param("mode", "rgb");
+  if (mode != "rgb" && mode != "gray") {
+    throw node::UsageError("face_light: mode must be rgb or gray, got '" + mode + "'");
+  }
+  fl::EstimatorOptions eo;
+  eo.back_prior = node.Param("back_prior", 0.1);
+  eo.ridge = node.Param("ridge", 0.0);
+  eo.robust = node.Param("robust", false);
+  eo.non_negative = node.Param("non_negative", false);
+  eo.weight_floor = node.Param("weight_floor", 0.0);
+  ft::SmootherOptions so;
+  so.enabled = node.Param("smoothing", true);
+  so.alpha = node.Param("smoothing_alpha", so.alpha);
+  so.change_threshold = node.Param("change_threshold", so.change_threshold);
+  if (!(so.alpha > 0 && so.alpha <= 1) || !(so.change_threshold > 0)) {
+    throw node::UsageError(
+        "face_light: smoothing_alpha must be in (0, 1] and change_threshold > 0");
+  }
+  const std::string json_path = node.Param("json_path", "");
+  const std::string json_mode = node.Param("json_mode", "frame");
+  if (json_mode != "frame" && json_mode != "exit") {
+    throw node::UsageError("face_light: json_mode must be frame or exit, got '" + json_mode + "'");
+  }
+
+  const fl::FaceLightModel model = fl::LoadModel(model_path);
+  const fl::FaceLightEstimator estimator(model, eo);
+  ft::LightSmoother smoother(so);
+  std::ofstream json;
+  if (!json_path.empty() && json_mode == "frame") {
+    json.open(json_path, std::ios::trunc);
+    if (!json) throw node::UsageError("face_light: cannot write json_path '" + json_path + "'");
+  }
+  std::string last_json;
+
+  bus::Subscriber observations =
+      node.CreateSubscriber<msgs::FaceObservation>("face/observation", {.queue_depth = 64});
+  bus::Publisher lights = node.CreatePublisher<msgs::ShLight>("face/light");
+  int64_t received = 0, published = 0;
+  std::vector<float> gray(static_cast<size_t>(estimator.SampleCount()));
+
+  auto on_observation = [&](bus::Sample&& sample) {
+    const auto obs = msgs::ReadMessage<msgs::FaceObservation>(sample.data());
+    obs->Validate();
+    ++received;
+    if (!obs->face_detected) {
+      smoother.Miss();
+      return;
+    }
+    if (static_cast<int>(obs->sample_count) != estimator.SampleCount()) {
+      throw fl::FaceLightError("face_light: observation has " + std::to_string(obs->sample_count) +
+                               " samples but model '" + model_path + "' has " +
+                               std::to_string(estimator.SampleCount()) +
+                               " (the tracker must sample the same model)");
+    }
+    const std::span<const uint64_t> valid(obs->sample_valid);
+    fl::LightEstimate e;
+    if (mode == "gray") {
+      for (size_t i = 0; i < gray.size(); ++i) {
+        gray[i] = (obs->sample_rgb[i][0] + obs->sample_rgb[i][1] + obs->sample_rgb[i][2]) / 3;
+      }
+      e = estimator.EstimateGray(gray, valid);
+    } else {
+      e = estimator.EstimateRgb({&obs->sample_rgb[0][0], gray.size() * 3}, valid);
+    }
+    if (e.channels == 0) {
+      smoother.Miss();
+      return;
+    }
+    e = smoother.Update(e);
+    // Face frame -> camera frame.
+    const auto& q = obs->head_pose.rotation;
+    std::array<double, 9> r{1, 0, 0, 0, 1, 0, 0, 0, 1};
+    if (q.w != 0 || q.x != 0 || q.y != 0 || q.z != 0) {
+      r = ft::MatrixFromQuaternion({q.w, q.x, q.y, q.z});
+    }
+    const ft::Sh9Rgb camera = ft::RotateSh9(e.coefficients, r);
+    const std::array<float, 3> direction = ft::RotateVector(r, e.dominant_direction);
+    const float confidence = e.confidence * obs->quality;
+
+    bus::Loan loan = lights.Borrow(sizeof(msgs::ShLight));
+    auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
+    *out = msgs::ShLight{};
+    out->header = obs->header;
+    out->bands = 3;
+    for (int n = 0; n < 9; ++n) {
+      for (int c = 0; c < 3; ++c) out->coefficients[n][c] = camera[n][c];
+    }
+    for (int k = 0; k < 3; ++k) out->dominant_direction[k] = direction[k];
+    out->intensity = e.intensity;
+    out->confidence = std::clamp(confidence, 0.f, 1.f);
+    lights.Publish(std::move(loan));
+    ++published;
+    if (!json_path.empty()) {
+      last_json = ft::LightJson(camera, direction, e.intensity, std::clamp(confidence, 0.f, 1.f),
+                                ft::LightColour(camera), obs->header.stamp_ns,
+                                std::string(obs->header.FrameId()));
+      if (json_mode == "frame") json << last_json << '\n' << std::flush;
+    }
+  };
+  std::vector<node::Handler> handlers{{&observations, on_observation}};
+  node.Spin(handlers);
+  if (!json_path.empty() && json_mode == "exit") {
+    std::ofstream out(json_path, std::ios::trunc);
+    out << (last_json.empty() ? "null" : last_json) << '\n';
+  }
+  node.Info() << "published " << published << " lights for " << received << " observations";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::RunMain<fl::FaceLightError>("face_light", [&] { return Run(argc, argv); });
+}

@@ -1,0 +1,151 @@
+// face_tracker: detects and tracks a face, estimates its head pose and samples a face_light
+// model's positions on it (docs/face_light.md, "face_tracker node").
+//
+// Subscribes `image` (msgs::Image rgb8 / bgr8 / mono8) and `camera_info` (msgs::CameraInfo,
+// optional: intrinsics for the head pose; without it a 60-degree guess). Publishes
+// `face/observation` (msgs::FaceObservation) for every image (face_detected = 0 when none) and,
+// with publish_debug_image, `face/debug_image` (rgb8, samples drawn: paper figure 1c).
+//
+// Params: backend (dlib | yunet | haar), shape_predictor_path, yunet_model_path,
+// haar_cascade_path, redetect_period, detect_max_width, pose_smoothing, sample_model (default
+// data/face_light/default_model.txt: absolute, else relative to the working directory, the source
+// tree, then <prefix>/share/probeless), saturation_level, dark_level, min_facing_cosine,
+// neighbour_threshold, four_point_frame, publish_debug_image.
+// Exit: 0 on SIGINT/SIGTERM, 2 on bad params or models (one line on stderr), 1 otherwise.
+#include "probeless/node/main.h"
+
+#include <cstring>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "probeless/face_light/model.h"
+#include "probeless/face_track/face_tracker.h"
+#include "probeless/face_track/sampling.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+
+namespace {
+
+using namespace probeless;
+namespace ft = probeless::face_track;
+
+std::string ResolveModel(const std::string& path) {
+  namespace fs = std::filesystem;
+  if (path.empty() || fs::path(path).is_absolute() || fs::exists(path)) return path;
+  for (const std::string base : {PROBELESS_SOURCE_TREE, PROBELESS_INSTALL_DATA}) {
+    const fs::path candidate = fs::path(base) / path;
+    if (fs::exists(candidate)) return candidate.string();
+  }
+  return path;  // LoadModel names it in its error
+}
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "face_tracker");
+  ft::TrackerOptions options;
+  options.backend = ft::BackendFromName(node.Param("backend", "dlib"));
+  options.shape_predictor_path = node.Param("shape_predictor_path", ft::kDefaultShapePredictorPath);
+  options.yunet_model_path = node.Param("yunet_model_path", "");
+  options.haar_cascade_path = node.Param("haar_cascade_path", ft::kDefaultHaarCascadePath);
+  options.redetect_period = node.Param("redetect_period", options.redetect_period);
+  options.detect_max_width = node.Param("detect_max_width", options.detect_max_width);
+  options.pose_smoothing = node.Param("pose_smoothing", options.pose_smoothing);
+  ft::SamplerOptions sampler_options;
+  sampler_options.saturation_level =
+      node.Param("saturation_level", sampler_options.saturation_level);
+  sampler_options.dark_level = node.Param("dark_level", sampler_options.dark_level);
+  sampler_options.min_facing_cosine =
+      node.Param("min_facing_cosine", sampler_options.min_facing_cosine);
+  sampler_options.neighbour_threshold =
+      node.Param("neighbour_threshold", sampler_options.neighbour_threshold);
+  sampler_options.four_point_frame =
+      node.Param("four_point_frame", sampler_options.four_point_frame);
+  const bool debug_image = node.Param("publish_debug_image", false);
+  const std::string model_path =
+      ResolveModel(node.Param("sample_model", "data/face_light/default_model.txt"));
+
+  const face_light::FaceLightModel model = face_light::LoadModel(model_path);
+  ft::FaceTracker tracker(options);
+  const ft::FaceSampler sampler(model, sampler_options);
+  node.Info() << "sampling " << sampler.SampleCount() << " positions of " << model_path;
+
+  bus::Subscriber images = node.CreateSubscriber<msgs::Image>("image", {.queue_depth = 4});
+  bus::Subscriber infos =
+      node.CreateSubscriber<msgs::CameraInfo>("camera_info", {.queue_depth = 4});
+  bus::Publisher observations = node.CreatePublisher<msgs::FaceObservation>("face/observation");
+  std::optional<bus::Publisher> debug;
+  size_t debug_capacity = 0;
+  std::optional<ft::Intrinsics> intrinsics;
+  std::vector<uint8_t> drawn;
+  int64_t frames = 0, found = 0;
+
+  auto on_info = [&](bus::Sample&& sample) {
+    const auto info = msgs::ReadMessage<msgs::CameraInfo>(sample.data());
+    if (info->fx > 0 && info->fy > 0)
+      intrinsics = ft::Intrinsics{info->fx, info->fy, info->cx, info->cy};
+  };
+  auto on_image = [&](bus::Sample&& sample) {
+    const auto image = msgs::ReadMessage<msgs::Image>(sample.data());
+    image->Validate(image.payload.size());
+    ft::ImageView view{reinterpret_cast<const uint8_t*>(image.payload.data()),
+                       static_cast<int>(image->width), static_cast<int>(image->height), image->step,
+                       ft::PixelFormat::kGray};
+    switch (image->encoding) {
+      case msgs::Encoding::kMono8:
+        break;
+      case msgs::Encoding::kRgb8:
+        view.format = ft::PixelFormat::kRgb;
+        break;
+      case msgs::Encoding::kBgr8:
+        view.format = ft::PixelFormat::kBgr;
+        break;
+      default:
+        throw node::UsageError("face_tracker: image encoding " +
+                               std::string(msgs::EncodingName(image->encoding)) +
+                               " not supported (expected rgb8, bgr8 or mono8)");
+    }
+    const ft::Intrinsics k =
+        intrinsics ? *intrinsics : ft::Intrinsics::Guess(view.width, view.height);
+    const ft::FaceTrack track = tracker.Track(view, k);
+    std::optional<ft::FaceSamples> samples;
+    if (track.found) samples = sampler.Sample(view, track);
+    ++frames;
+    found += track.found;
+
+    bus::Loan loan = observations.Borrow(sizeof(msgs::FaceObservation));
+    auto out = msgs::WriteMessage<msgs::FaceObservation>(loan.data());
+    out->header = image->header;
+    ft::FillObservation(track, samples ? &*samples : nullptr, *out);
+    observations.Publish(std::move(loan));
+
+    if (debug_image && track.found) {
+      const size_t bytes =
+          msgs::Image::MessageBytesFor(image->width, image->height, msgs::Encoding::kRgb8);
+      if (!debug || bytes > debug_capacity) {
+        debug.reset();
+        debug = node.CreatePublisher<msgs::Image>("face/debug_image", {.max_message_bytes = bytes});
+        debug_capacity = bytes;
+      }
+      ft::DrawDebugImage(view, track, *samples, k, drawn);
+      bus::Loan dl = debug->Borrow(bytes);
+      auto di = msgs::WriteMessage<msgs::Image>(dl.data());
+      di->header = image->header;
+      di->Init(image->width, image->height, msgs::Encoding::kRgb8);
+      std::memcpy(di.payload.data(), drawn.data(), drawn.size());
+      debug->Publish(std::move(dl));
+    }
+  };
+  node.Spin({{&infos, on_info}, {&images, on_image}});
+  node.Info() << "face found in " << found << " of " << frames << " frames ("
+              << tracker.full_detections() << " full, " << tracker.region_detections()
+              << " region detections)";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::RunMain<ft::FaceTrackError, face_light::FaceLightError>(
+      "face_tracker", [&] { return Run(argc, argv); });
+}
