@@ -1,0 +1,37 @@
+// Conversions between bus messages (msgs/) and the renderer's inputs and outputs.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "probeless/msgs/camera_info.h"
+#include "probeless/msgs/geometry.h"
+#include "probeless/msgs/geometry_buffer.h"
+#include "probeless/msgs/image.h"
+#include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/transfer_buffer.h"
+#include "probeless/render/renderer.h"
+
+namespace probeless::render {
+
+// The light's RGB coefficients. Throws RenderError if the message fails ShLight::Validate.
+ShLightRgb LightFromMsg(const msgs::ShLight& light);
+// A rigid transform (unit quaternion w, x, y, z). Throws RenderError for a zero quaternion.
+raytrace::Transform TransformFromMsg(const msgs::RigidTransform& transform);
+// Intrinsics of a calibration (distortion ignored). Throws RenderError for invalid values.
+Intrinsics IntrinsicsFromMsg(const msgs::CameraInfo& info);
+// Default intrinsics for an image without calibration: f = 525 * width / 640, centred.
+Intrinsics DefaultIntrinsics(int width, int height);
+// An rgb8, bgr8 or mono8 image as packed rgb8 (width * height * 3). Throws RenderError for other
+// encodings or a payload that fails Image::Validate.
+void ImageToRgb(const msgs::Image& image, std::span<const std::byte> payload,
+                std::vector<uint8_t>& rgb);
+// The depth plane of a geometry buffer (metres). Throws RenderError if it fails Validate.
+void GeometryDepth(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                   std::vector<float>& depth);
+// The coefficients of a transfer buffer (interleaved). Throws RenderError if it fails Validate.
+void TransferValues(const msgs::TransferBuffer& t, std::span<const std::byte> payload,
+                    std::vector<float>& values);
+
+}  // namespace probeless::render

@@ -1,0 +1,158 @@
+// The renderer node end to end (label render): publishes a camera image, a face observation and an
+// SH light on the bus, runs build/bin/renderer (OSMesa) and checks the published composite; the
+// node's bad-parameter and missing-mesh errors; prt_bake's output file and its errors.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "probeless/bus/bus.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/prt/prt.h"
+
+namespace probeless {
+namespace {
+
+std::string Bin(const std::string& name) { return std::string(PROBELESS_BIN_DIR) + "/" + name; }
+
+// Runs `command` through the shell; returns the exit status and the output (stdout + stderr).
+int RunCommand(const std::string& command, std::string* output) {
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  char buffer[4096];
+  size_t n;
+  while ((n = fread(buffer, 1, sizeof(buffer), pipe)) > 0) output->append(buffer, n);
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// Runs the node for one frame (offscreen, or in a GLFW window under xvfb-run -a) and checks it.
+void PublishesCompositeForLight(bool window) {
+  constexpr uint32_t kW = 160, kH = 120;
+  bus::PublisherOptions image_options;
+  image_options.max_message_bytes = msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8);
+  image_options.history = 1;
+  bus::Publisher image_pub("/camera/image", msgs::TopicTypeOf<msgs::Image>(), image_options);
+  bus::PublisherOptions face_options;
+  face_options.max_message_bytes = sizeof(msgs::FaceObservation);
+  face_options.history = 1;
+  bus::Publisher face_pub("/face/observation", msgs::TopicTypeOf<msgs::FaceObservation>(),
+                          face_options);
+  bus::PublisherOptions light_options;
+  light_options.max_message_bytes = sizeof(msgs::ShLight);
+  bus::Publisher light_pub("/light", msgs::TopicTypeOf<msgs::ShLight>(), light_options);
+  bus::Subscriber composite_sub("/render/composite", msgs::TopicTypeOf<msgs::Image>(),
+                                {.queue_depth = 4});
+
+  pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const std::string bin = Bin("renderer");
+    if (window) {
+      execlp("xvfb-run", "xvfb-run", "-a", bin.c_str(), "--ros-args", "-p", "objects:=[nose]", "-p",
+             "samples:=16", "-p", "max_frames:=1", "-p", "tone:=clamp", "-p", "backend:=window",
+             nullptr);
+    } else {
+      execl(bin.c_str(), bin.c_str(), "--ros-args", "-p", "objects:=[nose]", "-p", "samples:=16",
+            "-p", "max_frames:=1", "-p", "tone:=clamp", nullptr);
+    }
+    _exit(127);
+  }
+  // Wait until the node subscribes to the light, then publish image, face and light.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (light_pub.SubscriberCount() == 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GT(light_pub.SubscriberCount(), 0u);
+  {
+    bus::Loan loan = image_pub.Borrow(image_options.max_message_bytes);
+    auto m = msgs::WriteMessage<msgs::Image>(loan.data());
+    m->Init(kW, kH, msgs::Encoding::kRgb8);
+    m->header.sequence = 7;
+    std::memset(m.payload.data(), 90, m->PayloadBytes());
+    image_pub.Publish(std::move(loan));
+  }
+  {
+    bus::Loan loan = face_pub.Borrow(sizeof(msgs::FaceObservation));
+    auto m = msgs::WriteMessage<msgs::FaceObservation>(loan.data());
+    m->face_detected = 1;
+    m->head_pose.rotation.w = 1;
+    m->head_pose.translation.z = 0.5;
+    face_pub.Publish(std::move(loan));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  {
+    bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));
+    auto m = msgs::WriteMessage<msgs::ShLight>(loan.data());
+    m->bands = 3;
+    m->coefficients[0][0] = m->coefficients[0][1] = m->coefficients[0][2] = 3.0f;
+    m->header.StampNow();
+    light_pub.Publish(std::move(loan));
+  }
+  auto sample = composite_sub.Take(std::chrono::seconds(30));
+  ASSERT_TRUE(sample.has_value());
+  const auto m = msgs::ReadMessage<msgs::Image>(sample->data());
+  EXPECT_EQ(m->width, kW);
+  EXPECT_EQ(m->height, kH);
+  EXPECT_EQ(m->encoding, msgs::Encoding::kRgb8);
+  EXPECT_EQ(m->header.sequence, 7u);
+  const auto* rgb = reinterpret_cast<const uint8_t*>(m.payload.data());
+  // Corner: the camera image; the nose (centre-ish, below the nose bridge): red.
+  EXPECT_EQ(rgb[0], 90);
+  int red = 0;
+  for (size_t i = 0; i < kW * kH; ++i) red += rgb[i * 3] > 150 && rgb[i * 3 + 1] < 60;
+  EXPECT_GT(red, 50);
+  sample.reset();
+  int status = 0;
+  waitpid(child, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+}
+
+TEST(RenderNodeTest, PublishesCompositeForLight) { PublishesCompositeForLight(false); }
+
+TEST(RenderNodeTest, WindowBackendUnderXvfb) {
+  if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "xvfb-run is missing (apt-get install xvfb): window test skipped";
+  }
+  PublishesCompositeForLight(true);
+}
+
+TEST(RenderNodeTest, BadParamsAndMissingMeshFail) {
+  std::string out;
+  EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p mode:=orbit", &out), 2);
+  EXPECT_NE(out.find("param mode: expected face or scene, got 'orbit'"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p objects:=[/nonexistent/cup.obj]", &out),
+            2);
+  EXPECT_NE(
+      out.find("objects[0] '/nonexistent/cup.obj': /nonexistent/cup.obj: cannot open OBJ file"),
+      std::string::npos)
+      << out;
+}
+
+TEST(PrtBakeToolTest, BakesDemoObjectAndReportsErrors) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "render_node_test_nose.prt").string();
+  std::string out;
+  ASSERT_EQ(RunCommand(Bin("prt_bake") + " --demo nose --samples 16 --quiet --out " + path, &out),
+            0)
+      << out;
+  const prt::TransferMesh baked = prt::LoadPrt(path);
+  EXPECT_EQ(baked.bands, 3);
+  EXPECT_GT(baked.mesh.positions.size(), 100u);
+  out.clear();
+  EXPECT_EQ(RunCommand(Bin("prt_bake") + " /nonexistent/a.ply --out " + path, &out), 2);
+  EXPECT_NE(out.find("prt_bake: /nonexistent/a.ply: cannot open"), std::string::npos) << out;
+  out.clear();
+  EXPECT_EQ(RunCommand(Bin("prt_bake") + " --demo nose", &out), 2);
+  EXPECT_NE(out.find("--out FILE.prt is required"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace probeless

@@ -1,0 +1,251 @@
+// render_bench: speed of the AR renderer (docs/benchmarks/render.md).
+//
+//   render_bench [--json OUT] [--frames N] [--triangles T] [--backend offscreen|window]
+//
+// 1. Composite frame rate at 640x480: a face-anchored sphere of about T (50k) triangles with baked-
+//    style transfer over a camera image, the whole Render() (camera upload, three passes, read-
+//    back), without and with differential rendering (the proxy head as shadow receiver).
+// 2. Latency from a light message to the published composite: a light publisher thread stamps
+//    ShLight messages (CLOCK_MONOTONIC) at 30 Hz; the render loop takes each light, renders and
+//    publishes the composite (Image rgb8) with the light's stamp; a receiver thread takes the
+//    composites and records now - stamp. Transport is the probeless bus (shared memory).
+// Prints the JSON object on stdout and writes it to OUT.
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "probeless/bus/bus.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/prt/demo_objects.h"
+#include "probeless/prt/prt.h"
+#include "probeless/render/renderer.h"
+#include "probeless/sh/sh.h"
+
+namespace {
+
+using namespace probeless;
+using Clock = std::chrono::steady_clock;
+
+int64_t MonoNs() {
+  timespec t{};
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return static_cast<int64_t>(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
+}
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
+}
+
+double Mean(const std::vector<double>& v) {
+  double s = 0;
+  for (double x : v) s += x;
+  return v.empty() ? 0 : s / v.size();
+}
+
+prt::TransferMesh Sphere(int triangles) {
+  // A UV sphere with s segments has about s^2 triangles.
+  const int segments = std::max(8, static_cast<int>(std::lround(std::sqrt(triangles))));
+  prt::TransferMesh m;
+  m.mesh = raytrace::MakeSphere(0.03f, segments);
+  m.bands = 3;
+  for (const raytrace::Vec3& n : m.mesh.normals) {
+    const std::vector<float> t = prt::UnshadowedTransfer(n, 3);
+    m.transfer.insert(m.transfer.end(), t.begin(), t.end());
+  }
+  return m;
+}
+
+render::ShLightRgb Light(double phase) {
+  render::ShLightRgb light;
+  const std::vector<double> key =
+      sh::DirectionalLight({std::sin(phase) * 0.6, -0.6, -std::cos(phase) * 0.6}, 2.0, 3);
+  for (int k = 0; k < 9; ++k) light.coefficients[k] = {float(key[k]), float(key[k]), float(key[k])};
+  light.coefficients[0] = {light.coefficients[0][0] + 0.5f, light.coefficients[0][1] + 0.5f,
+                           light.coefficients[0][2] + 0.5f};
+  return light;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string json_path;
+  int frames = 300;
+  int triangles = 50000;
+  std::string backend = "offscreen";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--json" && i + 1 < argc)
+      json_path = argv[++i];
+    else if (a == "--frames" && i + 1 < argc)
+      frames = std::max(10, std::atoi(argv[++i]));
+    else if (a == "--triangles" && i + 1 < argc)
+      triangles = std::max(100, std::atoi(argv[++i]));
+    else if (a == "--backend" && i + 1 < argc)
+      backend = argv[++i];
+    else {
+      std::fprintf(stderr,
+                   "usage: render_bench [--json OUT] [--frames N] [--triangles T] "
+                   "[--backend offscreen|window]\n");
+      return 2;
+    }
+  }
+  try {
+    const std::string domain = "render_bench_" + std::to_string(getpid());
+    setenv("PROBELESS_DOMAIN", domain.c_str(), 1);
+    constexpr int kW = 640, kH = 480;
+    render::RendererOptions options;
+    options.backend = render::BackendFromName(backend);
+    options.width = kW;
+    options.height = kH;
+    options.tone.op = render::ToneOperator::kReinhard;
+    render::Renderer renderer(options);
+    render::VirtualObject object;
+    object.mesh = Sphere(triangles);
+    object.anchor = render::Anchor::kFace;
+    object.object_to_anchor = raytrace::Transform{raytrace::Mat3::Identity(), {0, 0.04, -0.06}};
+    const size_t triangle_count = object.mesh.mesh.triangles.size();
+    renderer.AddObject(object);
+    // The proxy head as receiver (identical transfer sets: the pass runs at full cost).
+    render::ShadowReceiver receiver;
+    receiver.mesh = prt::ProxyHead(48);
+    receiver.mesh.ComputeNormals();
+    for (const raytrace::Vec3& n : receiver.mesh.normals) {
+      const std::vector<float> t = prt::UnshadowedTransfer(n, 3);
+      receiver.transfer_real.insert(receiver.transfer_real.end(), t.begin(), t.end());
+    }
+    receiver.transfer_with_virtual = receiver.transfer_real;
+    receiver.anchor = render::Anchor::kFace;
+    const int receiver_index = renderer.AddReceiver(receiver);
+
+    std::vector<uint8_t> camera(kW * kH * 3);
+    for (size_t i = 0; i < camera.size(); ++i) camera[i] = static_cast<uint8_t>((i * 31) % 251);
+    render::FrameInputs in;
+    in.camera.width = kW;
+    in.camera.height = kH;
+    in.camera_rgb = camera;
+    in.face_valid = true;
+    in.face_to_camera = raytrace::Transform{raytrace::Mat3::FromEulerZyx(0.2, 0.1, 0), {0, 0, 0.5}};
+    render::Composite out;
+
+    auto run = [&](bool differential) {
+      renderer.SetReceiverVisible(receiver_index, differential);
+      std::vector<double> ms;
+      for (int f = 0; f < frames + 5; ++f) {
+        in.light = Light(f * 0.05);
+        const auto t0 = Clock::now();
+        renderer.Render(in, out);
+        const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        if (f >= 5) ms.push_back(dt);  // warm-up frames excluded
+      }
+      return ms;
+    };
+    const std::vector<double> plain = run(false);
+    const std::vector<double> diff = run(true);
+    size_t covered = 0;
+    for (uint8_t c : out.coverage) covered += c;
+
+    // Latency through the bus.
+    bus::PublisherOptions light_options;
+    light_options.max_message_bytes = sizeof(msgs::ShLight);
+    bus::Publisher light_pub("/bench/light", msgs::TopicTypeOf<msgs::ShLight>(), light_options);
+    bus::Subscriber light_sub("/bench/light", msgs::TopicTypeOf<msgs::ShLight>(),
+                              {.queue_depth = 4});
+    bus::PublisherOptions image_options;
+    image_options.max_message_bytes = msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8);
+    image_options.slot_count = 8;
+    bus::Publisher image_pub("/bench/composite", msgs::TopicTypeOf<msgs::Image>(), image_options);
+    bus::Subscriber image_sub("/bench/composite", msgs::TopicTypeOf<msgs::Image>(),
+                              {.queue_depth = 4});
+    const int latency_frames = std::min(frames, 150);
+    auto measure_latency = [&](bool differential) {
+      renderer.SetReceiverVisible(receiver_index, differential);
+      std::vector<double> latency;
+      std::atomic<bool> done{false};
+      std::thread receiver_thread([&] {
+        while (!done) {
+          auto s = image_sub.Take(std::chrono::milliseconds(50));
+          if (!s) continue;
+          const auto m = msgs::ReadMessage<msgs::Image>(s->data());
+          latency.push_back((MonoNs() - m->header.stamp_mono_ns) / 1e6);
+        }
+      });
+      std::thread light_thread([&] {
+        for (int f = 0; f < latency_frames; ++f) {
+          bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));
+          auto m = msgs::WriteMessage<msgs::ShLight>(loan.data());
+          const render::ShLightRgb l = Light(f * 0.05);
+          m->bands = 3;
+          for (int k = 0; k < 9; ++k)
+            for (int c = 0; c < 3; ++c) m->coefficients[k][c] = l.coefficients[k][c];
+          m->header.StampNow();
+          light_pub.Publish(std::move(loan));
+          std::this_thread::sleep_for(std::chrono::microseconds(33333));
+        }
+      });
+      for (int f = 0; f < latency_frames; ++f) {
+        auto s = light_sub.Take(std::chrono::seconds(2));
+        if (!s) break;
+        const auto m = msgs::ReadMessage<msgs::ShLight>(s->data());
+        in.light.bands = static_cast<int>(m->bands);
+        for (int k = 0; k < 9; ++k)
+          for (int c = 0; c < 3; ++c) in.light.coefficients[k][c] = m->coefficients[k][c];
+        const msgs::Header header = m->header;
+        s.reset();
+        renderer.Render(in, out);
+        bus::Loan loan = image_pub.Borrow(image_options.max_message_bytes);
+        auto img = msgs::WriteMessage<msgs::Image>(loan.data());
+        img->header = header;
+        img->Init(kW, kH, msgs::Encoding::kRgb8);
+        std::memcpy(img.payload.data(), out.rgb.data(), out.rgb.size());
+        image_pub.Publish(std::move(loan));
+      }
+      light_thread.join();
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      done = true;
+      receiver_thread.join();
+      return latency;
+    };
+    const std::vector<double> latency = measure_latency(false);
+    const std::vector<double> latency_diff = measure_latency(true);
+
+    char buffer[4096];
+    std::snprintf(
+        buffer, sizeof(buffer),
+        "{\"backend\": \"%s\", \"gl_version\": \"%s\", \"gl_renderer\": \"%s\", \"width\": %d, "
+        "\"height\": %d, \"triangles\": %zu, \"receiver_triangles\": %zu, \"covered_pixels\": %zu, "
+        "\"frames\": %d, \"fps\": %.1f, \"frame_ms_mean\": %.3f, \"frame_ms_p50\": %.3f, "
+        "\"frame_ms_p95\": %.3f, \"fps_differential\": %.1f, \"frame_ms_differential_p50\": %.3f, "
+        "\"frame_ms_differential_p95\": %.3f, \"latency_samples\": %zu, \"latency_ms_p50\": %.3f, "
+        "\"latency_ms_p95\": %.3f, \"latency_ms_max\": %.3f, \"latency_differential_ms_p50\": "
+        "%.3f, "
+        "\"latency_differential_ms_p95\": %.3f, \"lp_num_threads\": \"%s\"}",
+        backend.c_str(), renderer.gl_version().c_str(), renderer.gl_renderer().c_str(), kW, kH,
+        triangle_count, receiver.mesh.triangles.size(), covered, frames, 1000.0 / Mean(plain),
+        Mean(plain), Percentile(plain, 0.5), Percentile(plain, 0.95), 1000.0 / Mean(diff),
+        Percentile(diff, 0.5), Percentile(diff, 0.95), latency.size(), Percentile(latency, 0.5),
+        Percentile(latency, 0.95),
+        latency.empty() ? 0.0 : *std::max_element(latency.begin(), latency.end()),
+        Percentile(latency_diff, 0.5), Percentile(latency_diff, 0.95),
+        std::getenv("LP_NUM_THREADS") ? std::getenv("LP_NUM_THREADS") : "default");
+    std::printf("%s\n", buffer);
+    if (!json_path.empty()) {
+      std::ofstream(json_path) << buffer << "\n";
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "render_bench: %s\n", e.what());
+    return 1;
+  }
+}
