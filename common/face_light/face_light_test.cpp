@@ -342,8 +342,10 @@ TEST(EstimatorTest, RobustModeRejectsOutliers) {
   for (float& v : values) v += static_cast<float>(0.002 * (Uniform(rng) - 0.5));
   for (int i = 3; i < 294; i += 10) values[i] += 0.8f;  // 30 specular highlights
   for (int i = 6; i < 294; i += 25) values[i] = 0;      // 12 cast shadows
-  const LightEstimate plain = FaceLightEstimator(model).EstimateGray(values);
-  EstimatorOptions options;
+  EstimatorOptions linear;
+  linear.directional_fit = false;  // the paper's optimal linear direction
+  const LightEstimate plain = FaceLightEstimator(model, linear).EstimateGray(values);
+  EstimatorOptions options = linear;
   options.robust = true;
   const LightEstimate robust = FaceLightEstimator(model, options).EstimateGray(values);
   const std::array<double, 3> truth = YaleBLightDirection(-50, 15);
@@ -379,9 +381,94 @@ TEST(EstimatorTest, PriorAndNonNegativeModes) {
               bad.ridge = -1;
               FaceLightEstimator(model, bad);
             }),
-            "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor >= 0; "
-            "robust_iterations 1..20; robust_threshold > 0; nn_directions 9..1024; "
-            "nn_iterations 1..10000)");
+            "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
+            "direction_ridge, directional_robust >= 0; robust_iterations 1..20; "
+            "robust_threshold > 0; nn_directions 9..1024; nn_iterations 1..10000; "
+            "directional_grid 0..1024; directional_iterations 0..100)");
+}
+
+// Direction RTFs of `bands` bands for the synthetic normals of SyntheticRtfs(count, seed): the
+// clamped-cosine transfer, so a directional light renders the sharp attached shadow (up to band
+// `bands` - 1) that the 9-coefficient RTFs blur.
+std::vector<float> SyntheticDirectionRtfs(int count, uint64_t seed, int bands) {
+  const std::vector<Rtf> rtfs = SyntheticRtfs(count, seed);
+  const int n = bands * bands;
+  std::vector<float> out(static_cast<size_t>(count) * n);
+  for (int i = 0; i < count; ++i) {
+    // Recover albedo and normal from band 0 and band 1 of the 9-coefficient RTF.
+    const double a0 = sh::ClampedCosineCoefficient(0);
+    const double y0 = sh::Basis9({0, 0, 1})[0];
+    const double albedo = rtfs[i][0] * std::numbers::pi / (a0 * y0);
+    sh::Vec3 normal{-rtfs[i][3], -rtfs[i][1], rtfs[i][2]};  // Y_1 = (-y, z, -x) * 0.4886
+    const double len = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] +
+                                 normal[2] * normal[2]);
+    for (double& v : normal) v /= len;
+    const std::vector<double> basis = sh::Basis(bands, normal);
+    for (int k = 0; k < n; ++k) {
+      out[static_cast<size_t>(i) * n + k] = static_cast<float>(
+          albedo / std::numbers::pi * sh::ClampedCosineCoefficient(sh::DegreeOf(k)) * basis[k]);
+    }
+  }
+  return out;
+}
+
+TEST(EstimatorTest, DirectionalFitRecoversTheDirection) {
+  // Samples rendered with 5-band direction RTFs under a directional light of power 2 plus
+  // ambient 0.3: the directional fit recovers the direction (the linear band-1 direction of the
+  // 9-coefficient fit is biased), with and without the direction RTFs, with invalid samples.
+  const int count = 300;
+  FaceLightModel model = ModelFrom(SyntheticRtfs(count, 21));
+  model.direction_bands = 5;
+  model.direction_rtf = SyntheticDirectionRtfs(count, 21, 5);
+  EstimatorOptions linear;
+  linear.directional_fit = false;
+  EstimatorOptions exact;  // no Tikhonov weight on the direction RTFs: exact recovery
+  exact.direction_ridge = 0;
+  const FaceLightEstimator directional(model, exact);
+  const FaceLightEstimator paper(model, linear);
+  for (const auto& [azimuth, elevation] :
+       std::vector<std::pair<double, double>>{{0, 0}, {50, -20}, {-95, 10}, {35, 65}}) {
+    const std::array<double, 3> d = YaleBLightDirection(azimuth, elevation);
+    const std::vector<double> y = sh::Basis(5, d);
+    std::vector<float> values(count);
+    for (int i = 0; i < count; ++i) {
+      double v = 0.3 * model.direction_rtf[static_cast<size_t>(i) * 25];
+      for (int k = 0; k < 25; ++k) v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
+      values[i] = static_cast<float>(v);  // ModelFrom's intensity_exponent is 1
+    }
+    const LightEstimate fit = directional.EstimateGray(values);
+    ASSERT_EQ(fit.channels, 1);
+    EXPECT_LT(AngleDeg(fit.dominant_direction, d), 0.2) << azimuth << " " << elevation;
+    std::vector<uint64_t> valid(8, ~uint64_t{0});
+    for (int i = 0; i < count; i += 9) valid[i / 64] &= ~(uint64_t{1} << (i % 64));
+    EXPECT_LT(AngleDeg(directional.EstimateGray(values, valid).dominant_direction, d), 0.2);
+    const double linear_error = AngleDeg(paper.EstimateGray(values).dominant_direction, d);
+    EXPECT_GT(linear_error, AngleDeg(fit.dominant_direction, d));
+  }
+  // Without direction RTFs the fit uses the 9-coefficient RTFs: exact for a band-2 light.
+  EstimatorOptions nine;
+  nine.use_direction_rtfs = false;
+  const std::vector<float> band2 = Render(model, TestLight(-60, 25));
+  EXPECT_LT(AngleDeg(FaceLightEstimator(model, nine).EstimateGray(band2).dominant_direction,
+                     YaleBLightDirection(-60, 25)),
+            0.1);
+  // Robust re-fit: 20 highlights (+0.5) on exact 5-band samples are dropped.
+  EstimatorOptions robust = exact;
+  robust.directional_robust = 3;
+  const std::array<double, 3> d = YaleBLightDirection(40, 10);
+  const std::vector<double> y = sh::Basis(5, d);
+  std::vector<float> values(count);
+  std::mt19937_64 rng(3);
+  for (int i = 0; i < count; ++i) {
+    double v = 0;
+    for (int k = 0; k < 25; ++k) v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
+    values[i] = static_cast<float>(v + 0.002 * (Uniform(rng) - 0.5) + (i % 15 == 4 ? 0.5 : 0));
+  }
+  const double plain_error = AngleDeg(directional.EstimateGray(values).dominant_direction, d);
+  const double robust_error =
+      AngleDeg(FaceLightEstimator(model, robust).EstimateGray(values).dominant_direction, d);
+  EXPECT_LT(robust_error, 0.3);
+  EXPECT_LT(robust_error, plain_error);
 }
 
 TEST(EstimatorTest, FillShLightCopiesTheEstimate) {
@@ -427,6 +514,24 @@ TEST_F(ModelFileTest, RoundTripIsExact) {
   EXPECT_EQ(loaded.intensity_exponent, 0.5);
   EXPECT_EQ(loaded.training.subjects, model.training.subjects);
   EXPECT_EQ(loaded.training.percentile, 87.5);
+  // Version 2 with direction RTFs.
+  model.direction_bands = 4;
+  model.direction_rtf = SyntheticDirectionRtfs(50, 16, 4);
+  SaveModel(model, path);
+  const FaceLightModel with_directions = LoadModel(path);
+  EXPECT_EQ(SerializeModel(with_directions), SerializeModel(model));
+  EXPECT_EQ(with_directions.direction_bands, 4);
+  EXPECT_EQ(with_directions.direction_rtf, model.direction_rtf);
+}
+
+TEST_F(ModelFileTest, Version1FilesStillLoad) {
+  std::string text = SerializeModel(ModelFrom(SyntheticRtfs(30, 18)));
+  text.replace(text.find("probeless_face_light_model 2"), 28, "probeless_face_light_model 1");
+  text.erase(text.find("direction_bands 0\n"), 18);
+  const FaceLightModel model = ParseModel(text, "v1.model");
+  EXPECT_EQ(model.SampleCount(), 30);
+  EXPECT_EQ(model.direction_bands, 0);
+  EXPECT_NO_THROW(FaceLightEstimator(model, {}));
 }
 
 TEST_F(ModelFileTest, CorruptFilesGiveOneLineErrors) {
@@ -445,25 +550,29 @@ TEST_F(ModelFileTest, CorruptFilesGiveOneLineErrors) {
   EXPECT_EQ(error(""),
             "m.model: line 1: unexpected end of file, expected the magic line "
             "(truncated?)");
-  EXPECT_EQ(error(replace("probeless_face_light_model 1", "probeless_face_light_model 2")),
-            "m.model: line 1: unsupported version 2 (expected 1)");
+  EXPECT_EQ(error(replace("probeless_face_light_model 2", "probeless_face_light_model 3")),
+            "m.model: line 1: unsupported version 3 (expected 1 or 2)");
+  EXPECT_EQ(error(replace("direction_bands 0", "direction_bands 3")),
+            "m.model: line 5: direction_bands 3 must be 0, 4 or 5");
+  EXPECT_EQ(error(replace("direction_bands 0", "frame x")),
+            "m.model: line 5: expected 'direction_bands', found 'frame'");
   EXPECT_EQ(error(replace("condon-shortley", "no-phase")),
             "m.model: line 3: SH convention 'real-orthonormal;no-phase;index=l(l+1)+m' differs "
             "from 'real-orthonormal;condon-shortley;index=l(l+1)+m'");
   EXPECT_EQ(error(replace("samples 3", "samples 4")),
-            "m.model: line 19: expected 'sample', found 'end'");
+            "m.model: line 20: expected 'sample', found 'end'");
   EXPECT_EQ(error(good.substr(0, good.rfind("sample "))),
-            "m.model: line 18: unexpected end of file, expected 'sample' (truncated?)");
+            "m.model: line 19: unexpected end of file, expected 'sample' (truncated?)");
   EXPECT_EQ(error(replace("samples 3", "samples 600")),
-            "m.model: line 14: samples 600 out of range 1..512");
+            "m.model: line 15: samples 600 out of range 1..512");
   EXPECT_EQ(error(replace("sample 0.025", "sample nan")),
-            "m.model: line 16: bad u 'nan' (expected a finite number)");
+            "m.model: line 17: bad u 'nan' (expected a finite number)");
   EXPECT_EQ(error(replace("intensity_exponent 1", "intensity_exponent 3")),
-            "m.model: line 8: intensity_exponent must be in (0, 2]");
+            "m.model: line 9: intensity_exponent must be in (0, 2]");
   EXPECT_EQ(error(replace("training_images 128", "training_images many")),
-            "m.model: line 11: bad training_images 'many' (expected an integer)");
+            "m.model: line 12: bad training_images 'many' (expected an integer)");
   EXPECT_EQ(error(replace("end\n", "")),
-            "m.model: line 19: unexpected end of file, expected 'end' (truncated?)");
+            "m.model: line 20: unexpected end of file, expected 'end' (truncated?)");
   EXPECT_EQ(ErrorOf([&] { LoadModel((dir_ / "missing.model").string()); }),
             (dir_ / "missing.model").string() + ": cannot open model file");
 }

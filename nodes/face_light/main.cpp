@@ -9,6 +9,7 @@
 //
 // Params: model (default data/face_light/default_model.txt, resolved like face_tracker's
 // sample_model), mode (rgb | gray), back_prior (0.1), ridge, robust, non_negative, weight_floor,
+// directional_fit (true: dominant direction by the directional-light fit), directional_robust (0),
 // smoothing (true), smoothing_alpha (0.3), change_threshold (0.35), json_path ("" = none),
 // json_mode (frame: one JSON line per estimate appended to json_path | exit: the last estimate
 // written on exit).
@@ -58,6 +59,8 @@ int Run(int argc, char** argv) {
   eo.robust = node.Param("robust", false);
   eo.non_negative = node.Param("non_negative", false);
   eo.weight_floor = node.Param("weight_floor", 0.0);
+  eo.directional_fit = node.Param("directional_fit", eo.directional_fit);
+  eo.directional_robust = node.Param("directional_robust", eo.directional_robust);
   ft::SmootherOptions so;
   so.enabled = node.Param("smoothing", true);
   so.alpha = node.Param("smoothing_alpha", so.alpha);

@@ -78,10 +78,13 @@ int Run(int argc, char** argv) {
     for (int i = 0; i < n; ++i) gray_frames[f][i] = rgb_frames[f][3 * i + 1];
   }
   std::vector<Case> cases;
-  cases.push_back({"gray", {}, false, 0});
-  cases.push_back({"rgb", {}, true, 0});
-  cases.push_back({"rgb_10pct_invalid", {}, true, 10});
-  fl::EstimatorOptions prior;
+  // Linear cases: the paper's optimal linear direction (directional_fit off).
+  fl::EstimatorOptions linear;
+  linear.directional_fit = false;
+  cases.push_back({"gray", linear, false, 0});
+  cases.push_back({"rgb", linear, true, 0});
+  cases.push_back({"rgb_10pct_invalid", linear, true, 10});
+  fl::EstimatorOptions prior = linear;
   prior.back_prior = 0.1;
   cases.push_back({"rgb_back_prior", prior, true, 0});
   fl::EstimatorOptions robust = prior;
@@ -90,6 +93,18 @@ int Run(int argc, char** argv) {
   fl::EstimatorOptions nn = prior;
   nn.non_negative = true;
   cases.push_back({"rgb_non_negative", nn, true, 0});
+  // The default: directional fit (with the model's direction RTFs when it has them).
+  fl::EstimatorOptions directional;
+  directional.back_prior = 0.1;
+  cases.push_back({"gray_directional", directional, false, 0});
+  cases.push_back({"rgb_directional", directional, true, 0});
+  cases.push_back({"rgb_directional_10pct_invalid", directional, true, 10});
+  fl::EstimatorOptions directional_robust = directional;
+  directional_robust.directional_robust = 3;
+  cases.push_back({"rgb_directional_robust", directional_robust, true, 0});
+  fl::EstimatorOptions directional9 = directional;
+  directional9.use_direction_rtfs = false;
+  cases.push_back({"rgb_directional_9coef", directional9, true, 0});
 
   std::string json = "{\n  \"model\": \"" + model_path +
                      "\",\n  \"samples\": " + std::to_string(n) +

@@ -2,7 +2,8 @@
 // not trained on and compares the optimal linear direction with the file name's azimuth and
 // elevation (Knorr & Kurz 2014, sec. 5.1). Writes JSON figures and optional PNG plots.
 //
-//   face_light_eval --model MODEL --yaleb DIR [--subjects LIST] [--landmarks aligned] --json OUT
+//   face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]
+//                   [--landmarks aligned] --json OUT
 //                   [--plots DIR] [--ridge X] [--back-prior X] [--robust] [--robust-threshold X]
 //                   [--non-negative] [--weight-floor X]
 #include <algorithm>
@@ -33,15 +34,21 @@ namespace {
 constexpr double kDeg = 180 / std::numbers::pi;
 
 constexpr const char* kUsage =
-    "usage: face_light_eval --model MODEL --yaleb DIR [--subjects LIST] [--landmarks aligned]\n"
+    "usage: face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]\n"
+    "                       [--landmarks aligned]\n"
     "                       --json OUT [--plots DIR] [estimator options]\n"
+    "  --synthetic DIR       a `sim --yaleb-style` folder instead of --yaleb; with --rgb images\n"
+    "                        (.ppm) the JSON adds colour_angle_deg_mean (docs/sim.md)\n"
     "  --subjects LIST       test subjects (default: every subject in DIR the model was not\n"
     "                        trained on); a training subject is an error\n"
     "  --landmarks aligned   sample positions from the aligned crop (the only mode: the Yale B\n"
     "                        crops are aligned to the canonical frame)\n"
     "  --plots DIR           write azimuth/elevation scatter plots and lat-long maps (PNG)\n"
     "  estimator options: --ridge X --back-prior X --robust --robust-threshold X\n"
-    "                     --non-negative --weight-floor X (docs/face_light.md)\n";
+    "                     --non-negative --weight-floor X --linear-direction\n"
+    "                     --directional-grid N --directional-iterations N --no-ambient\n"
+    "                     --no-direction-rtfs --direction-ridge X --directional-robust K\n"
+    "                     (docs/face_light.md)\n";
 
 struct Result {
   int subject = 0;
@@ -184,9 +191,105 @@ void LatLongFigure(const std::string& path, const fl::YaleBImage& face,
   if (!cv::imwrite(path, canvas)) throw fl::FaceLightError(path + ": cannot write PNG");
 }
 
+// --synthetic: the colour error on the .ppm images of `sim --yaleb-style --rgb` (docs/sim.md).
+// Per image, EstimateRgb on the RGB patches; estimated light colour = band-0 coefficient per
+// channel raised to 1 / intensity_exponent (undoing the model's response); true colour from the
+// sidecar yaleBxx_P00_lights.txt. "Corrected": the inputs are first divided by the subject's skin
+// chromaticity, measured on its frontal-lit .ppm (median of value / true light colour per
+// channel, normalised to mean 1), as a calibration shot; "uncorrected" keeps the skin tint.
+struct ColourFigures {
+  std::vector<double> corrected, uncorrected;  // angles, degrees
+};
+
+double ColourAngle(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const double n = std::sqrt((a[0] * a[0] + a[1] * a[1] + a[2] * a[2]) *
+                             (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]));
+  return n > 0 ? std::acos(std::clamp(dot / n, -1.0, 1.0)) * kDeg : 90;
+}
+
+ColourFigures EvaluateSyntheticColour(const std::string& dir, const std::vector<int>& subjects,
+                                      const fl::FaceLightModel& model,
+                                      const fl::FaceLightEstimator& estimator) {
+  ColourFigures figures;
+  const int n = model.SampleCount();
+  for (int subject : subjects) {
+    char folder_name[16];
+    std::snprintf(folder_name, sizeof folder_name, "yaleB%02d", subject);
+    const std::filesystem::path folder = std::filesystem::path(dir) / folder_name;
+    std::ifstream sidecar(folder / (std::string(folder_name) + "_P00_lights.txt"));
+    std::vector<std::pair<std::string, std::array<double, 3>>> files;  // .ppm, light colour
+    std::string line;
+    while (std::getline(sidecar, line)) {
+      char file[64];
+      double a, e, dx, dy, dz, r, g, b;
+      if (std::sscanf(line.c_str(), "%63s %lf %lf %lf %lf %lf %lf %lf %lf", file, &a, &e, &dx, &dy,
+                      &dz, &r, &g, &b) == 9 &&
+          std::string_view(file).ends_with(".ppm")) {
+        files.push_back({file, {r, g, b}});
+      }
+    }
+    if (files.empty()) continue;
+    std::sort(files.begin(), files.end());
+    const auto sample = [&](const std::string& file, std::vector<float>& values,
+                            std::vector<uint8_t>& valid) {
+      const std::string path = (folder / file).string();
+      cv::Mat bgr = cv::imread(path, cv::IMREAD_COLOR);
+      if (bgr.empty()) throw fl::FaceLightError(path + ": cannot decode image");
+      if (bgr.cols != fl::kCropWidth || bgr.rows != fl::kCropHeight) {
+        throw fl::FaceLightError(path + ": image is " + std::to_string(bgr.cols) + "x" +
+                                 std::to_string(bgr.rows) + ", expected the 168x192 crop");
+      }
+      cv::Mat rgb;
+      cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
+      fl::SamplePatches(rgb.ptr<uint8_t>(), rgb.cols, rgb.rows, rgb.step, 3,
+                        fl::SimilarityTransform{}, model.positions, model.patch_radius_px, 255,
+                        values, valid);
+    };
+    std::vector<float> values(3 * n), scaled(3 * n);
+    std::vector<uint8_t> valid(n);
+    std::vector<uint64_t> bits((n + 63) / 64);
+    // Skin chromaticity from the frontal-lit image.
+    std::array<double, 3> skin{1, 1, 1};
+    for (const auto& [file, colour] : files) {
+      if (file.find("A+000E+00") == std::string::npos) continue;
+      sample(file, values, valid);
+      for (int c = 0; c < 3; ++c) {
+        std::vector<double> ratios;
+        for (int i = 0; i < n; ++i) {
+          if (valid[i] && values[3 * i + c] > 0) ratios.push_back(values[3 * i + c] / colour[c]);
+        }
+        skin[c] = Median(ratios);
+      }
+      const double mean = (skin[0] + skin[1] + skin[2]) / 3;
+      for (double& k : skin) k = mean > 0 && k > 0 ? k / mean : 1;
+    }
+    for (const auto& [file, colour] : files) {
+      sample(file, values, valid);
+      std::fill(bits.begin(), bits.end(), 0);
+      for (int i = 0; i < n; ++i) {
+        if (valid[i]) bits[i / 64] |= uint64_t{1} << (i % 64);
+      }
+      for (int i = 0; i < 3 * n; ++i) scaled[i] = static_cast<float>(values[i] / skin[i % 3]);
+      for (int pass = 0; pass < 2; ++pass) {
+        const fl::LightEstimate e = estimator.EstimateRgb(pass == 0 ? scaled : values, bits);
+        std::array<double, 3> estimated{};
+        for (int c = 0; c < 3; ++c) {
+          estimated[c] = std::pow(std::max(static_cast<double>(e.coefficients[0][c]), 1e-9),
+                                  1.0 / model.intensity_exponent);
+        }
+        (pass == 0 ? figures.corrected : figures.uncorrected)
+            .push_back(e.channels == 0 ? 90.0 : ColourAngle(estimated, colour));
+      }
+    }
+  }
+  return figures;
+}
+
 int Run(int argc, char** argv) {
   std::string model_path, yaleb, subjects_text, json_path, plots, landmarks = "aligned";
   fl::EstimatorOptions options;
+  bool synthetic = false;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (flag == "-h" || flag == "--help") {
@@ -201,6 +304,18 @@ int Run(int argc, char** argv) {
       options.non_negative = true;
       continue;
     }
+    if (flag == "--linear-direction") {  // Sloan's optimal linear direction (the paper)
+      options.directional_fit = false;
+      continue;
+    }
+    if (flag == "--no-ambient") {
+      options.directional_ambient = false;
+      continue;
+    }
+    if (flag == "--no-direction-rtfs") {
+      options.use_direction_rtfs = false;
+      continue;
+    }
     if (i + 1 >= argc) {
       std::cerr << "face_light_eval: " << flag << " needs a value (or is unknown)\n" << kUsage;
       return 2;
@@ -208,8 +323,9 @@ int Run(int argc, char** argv) {
     const std::string value = argv[++i];
     if (flag == "--model") {
       model_path = value;
-    } else if (flag == "--yaleb") {
+    } else if (flag == "--yaleb" || flag == "--synthetic") {
       yaleb = value;
+      synthetic = flag == "--synthetic";
     } else if (flag == "--subjects") {
       subjects_text = value;
     } else if (flag == "--landmarks") {
@@ -226,6 +342,14 @@ int Run(int argc, char** argv) {
       options.robust_threshold = ParseNumber(flag, value);
     } else if (flag == "--weight-floor") {
       options.weight_floor = ParseNumber(flag, value);
+    } else if (flag == "--directional-grid") {
+      options.directional_grid = static_cast<int>(ParseNumber(flag, value));
+    } else if (flag == "--directional-iterations") {
+      options.directional_iterations = static_cast<int>(ParseNumber(flag, value));
+    } else if (flag == "--directional-robust") {
+      options.directional_robust = ParseNumber(flag, value);
+    } else if (flag == "--direction-ridge") {
+      options.direction_ridge = ParseNumber(flag, value);
     } else {
       std::cerr << "face_light_eval: unknown option " << flag << "\n" << kUsage;
       return 2;
@@ -337,7 +461,9 @@ int Run(int argc, char** argv) {
       buffer, sizeof buffer,
       "{\n  \"model\": \"%s\",\n  \"samples\": %d,\n  \"training_subjects\": [%s],\n"
       "  \"test_subjects\": [%s],\n  \"options\": {\"ridge\": %g, \"back_prior\": %g, "
-      "\"robust\": %s, \"robust_threshold\": %g, \"non_negative\": %s, \"weight_floor\": %g},\n"
+      "\"robust\": %s, \"robust_threshold\": %g, \"non_negative\": %s, \"weight_floor\": %g, "
+      "\"directional_fit\": %s, "
+      "\"directional_ambient\": %s, \"direction_bands\": %d},\n"
       "  \"images\": %zu,\n  \"angular_mean_deg\": %.3f,\n  \"angular_median_deg\": %.3f,\n"
       "  \"angular_std_deg\": %.3f,\n  \"angular_mean_deg_below_75\": %.3f,\n"
       "  \"fraction_above_75\": %.4f,\n  \"azimuth_mae_deg\": %.3f,\n  \"azimuth_std_deg\": %.3f,\n"
@@ -346,13 +472,29 @@ int Run(int argc, char** argv) {
       model_path.c_str(), model.SampleCount(), trained_list.c_str(), subject_list.c_str(),
       options.ridge, options.back_prior, options.robust ? "true" : "false",
       options.robust_threshold, options.non_negative ? "true" : "false", options.weight_floor,
+      options.directional_fit ? "true" : "false", options.directional_ambient ? "true" : "false",
+      options.directional_fit && options.use_direction_rtfs ? model.direction_bands : 0,
       results.size(), Mean(angular), Median(angular), Std(angular), Mean(angular_75),
       1.0 - static_cast<double>(angular_75.size()) / std::max<size_t>(results.size(), 1),
       Mean(azimuth), Std(azimuth), Mean(elevation), Std(elevation), Median(micros));
-  json << buffer;
+  std::string text = buffer;
+  if (synthetic) {
+    const ColourFigures colour = EvaluateSyntheticColour(yaleb, subjects, model, estimator);
+    if (!colour.corrected.empty()) {
+      char extra[512];
+      std::snprintf(extra, sizeof extra,
+                    ",\n  \"rgb_images\": %zu,\n  \"colour_angle_deg_mean\": %.3f,\n"
+                    "  \"colour_angle_deg_median\": %.3f,\n"
+                    "  \"colour_angle_deg_mean_uncorrected\": %.3f\n}\n",
+                    colour.corrected.size(), Mean(colour.corrected), Median(colour.corrected),
+                    Mean(colour.uncorrected));
+      text = text.substr(0, text.rfind("\n}")) + extra;
+    }
+  }
+  json << text;
   json.close();
   if (!json) throw fl::FaceLightError(json_path + ": write failed");
-  std::cout << buffer;
+  std::cout << text;
 
   if (!plots.empty()) {
     std::vector<std::pair<double, double>> az, el;

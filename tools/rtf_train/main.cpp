@@ -1,8 +1,10 @@
 // rtf_train: trains the Knorr & Kurz (2014) radiance transfer functions on Extended Yale B crops
 // and writes a face_light model file (docs/face_light.md).
 //
-//   rtf_train --yaleb DIR [--subjects LIST] [--points N] [--percentile P] [--patch-radius R]
-//             [--intensity-exponent G] [--grid-step PX] --out MODEL
+//   rtf_train --yaleb DIR | --synthetic DIR [--subjects LIST] [--points N] [--percentile P]
+//             [--patch-radius R]
+//             [--intensity-exponent G] [--grid-step PX] [--direction-bands B]
+//             [--direction-ridge X] --out MODEL
 //
 // Progress goes to stderr; errors are one line on stderr and exit code 1 (2 for usage errors).
 #include <cstdio>
@@ -20,16 +22,23 @@ namespace fl = probeless::face_light;
 namespace {
 
 constexpr const char* kUsage =
-    "usage: rtf_train --yaleb DIR [--subjects LIST] [--points N] [--percentile P]\n"
-    "                 [--patch-radius R] [--intensity-exponent G] [--grid-step PX] --out MODEL\n"
+    "usage: rtf_train --yaleb DIR|--synthetic DIR [--subjects LIST] [--points N] [--percentile P]\n"
+    "                 [--patch-radius R] [--intensity-exponent G] [--grid-step PX]\n"
+    "                 [--direction-bands B] [--direction-ridge X] --out MODEL\n"
     "  --yaleb DIR        Extended Yale B cropped folder (yaleBxx/ sub-folders)\n"
+    "  --synthetic DIR    a Yale-B-style folder from `sim --yaleb-style` (same layout; the\n"
+    "                     .pgm images are used, .ppm colour images are ignored)\n"
     "  --subjects LIST    training subjects, e.g. 1-28 or 1,3,5-7 (default: all in DIR)\n"
     "  --points N         keep exactly N samples (default: use --percentile)\n"
     "  --percentile P     keep candidates above the P-th percentile of |RTF coefficient| for\n"
-    "                     at least one coefficient (default 90, Knorr & Kurz sec. 6)\n"
+    "                     at least one coefficient (default 0 = every candidate; the\n"
+    "                     paper's 90 keeps ~300 of 512, Knorr & Kurz sec. 6)\n"
     "  --patch-radius R   box patch half size in crop pixels (default 2: 5x5)\n"
     "  --intensity-exponent G  response exponent of the RTF fit (default 0.5; 1 = the paper)\n"
     "  --grid-step PX     candidate grid step in crop pixels (default 6.42: 512 candidates)\n"
+    "  --direction-bands B  also fit B-band direction RTFs for the directional fit\n"
+    "                     (0 = none, 4 or 5; default 5)\n"
+    "  --direction-ridge X  Tikhonov weight of the direction RTF fit (default 1e-3)\n"
     "  --out MODEL        model file to write\n";
 
 void Progress(const std::string& label, double fraction) {
@@ -54,6 +63,8 @@ int Run(int argc, char** argv) {
   std::string yaleb, out, subjects_text;
   fl::TrainingOptions options;
   options.intensity_exponent = 0.5;
+  options.percentile = 0;       // keep every candidate (512): best for the directional fit
+  options.direction_bands = 5;  // direction RTFs, bands 0..4 (docs/face_light.md)
   double grid_step = 6.42;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
@@ -66,7 +77,7 @@ int Run(int argc, char** argv) {
       return 2;
     }
     const std::string value = argv[++i];
-    if (flag == "--yaleb") {
+    if (flag == "--yaleb" || flag == "--synthetic") {
       yaleb = value;
     } else if (flag == "--subjects") {
       subjects_text = value;
@@ -78,6 +89,10 @@ int Run(int argc, char** argv) {
       options.patch_radius_px = static_cast<int>(ParseNumber(flag, value));
     } else if (flag == "--intensity-exponent") {
       options.intensity_exponent = ParseNumber(flag, value);
+    } else if (flag == "--direction-bands") {
+      options.direction_bands = static_cast<int>(ParseNumber(flag, value));
+    } else if (flag == "--direction-ridge") {
+      options.direction_ridge = ParseNumber(flag, value);
     } else if (flag == "--grid-step") {
       grid_step = ParseNumber(flag, value);
     } else if (flag == "--out") {
@@ -88,7 +103,7 @@ int Run(int argc, char** argv) {
     }
   }
   if (yaleb.empty() || out.empty()) {
-    std::cerr << "rtf_train: --yaleb and --out are required\n" << kUsage;
+    std::cerr << "rtf_train: --yaleb (or --synthetic) and --out are required\n" << kUsage;
     return 2;
   }
   const std::vector<int> available = fl::ListYaleBSubjects(yaleb);

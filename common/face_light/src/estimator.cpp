@@ -31,6 +31,127 @@ float Dot8(const float* a, const float* b, int count) {
          ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]));
 }
 
+constexpr int kMaxDirN = 25;  // 5 bands
+
+// Directional fit in coefficient space: minimise cost(E) = E^T M E - 2 b^T E (the least-squares
+// cost up to a constant) over E = a Y(d) + c e_0, a >= 0 (c = 0 without ambient). For a fixed d,
+// a and c are closed form and cost(d) = -(a b.Y(d) + c b_0).
+struct DirectionalProblem {
+  const double* m;  // n x n
+  const double* b;  // n
+  int bands;
+  int n;
+  bool ambient;
+
+  double Cost(const double* y, double* a_out = nullptr, double* c_out = nullptr) const {
+    double my[kMaxDirN];
+    double syy = 0, ry = 0;
+    for (int i = 0; i < n; ++i) {
+      double sum = 0;
+      const double* row = m + i * n;
+      for (int j = 0; j < n; ++j) sum += row[j] * y[j];
+      my[i] = sum;
+      syy += y[i] * sum;
+      ry += b[i] * y[i];
+    }
+    double a = 0, c = 0, cost = 0;
+    if (ambient) {
+      const double s0y = my[0], s00 = m[0], r0 = b[0];
+      const double det = syy * s00 - s0y * s0y;
+      if (det > 1e-12 * syy * s00) {
+        a = (ry * s00 - s0y * r0) / det;
+        c = (syy * r0 - s0y * ry) / det;
+      }
+      if (!(a > 0)) {
+        a = 0;
+        c = s00 > 0 ? r0 / s00 : 0;
+      }
+      cost = -(a * ry + c * r0);
+    } else {
+      a = syy > 0 ? std::max(ry / syy, 0.0) : 0;
+      cost = -a * ry;
+    }
+    if (a_out) *a_out = a;
+    if (c_out) *c_out = c;
+    return cost;
+  }
+  double CostAt(const sh::Vec3& d, double* a = nullptr, double* c = nullptr) const {
+    double y[kMaxDirN];
+    sh::EvaluateBasis<double>(bands, d[0], d[1], d[2], y);
+    return Cost(y, a, c);
+  }
+};
+
+sh::Vec3 Normalised(const sh::Vec3& v) {
+  const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  return {v[0] / len, v[1] / len, v[2] / len};
+}
+
+// Tangent basis of unit d.
+void Tangents(const sh::Vec3& d, sh::Vec3& t1, sh::Vec3& t2) {
+  const sh::Vec3 helper = std::abs(d[0]) < 0.9 ? sh::Vec3{1, 0, 0} : sh::Vec3{0, 1, 0};
+  t1 = Normalised({helper[1] * d[2] - helper[2] * d[1], helper[2] * d[0] - helper[0] * d[2],
+                   helper[0] * d[1] - helper[1] * d[0]});
+  t2 = {d[1] * t1[2] - d[2] * t1[1], d[2] * t1[0] - d[0] * t1[2], d[0] * t1[1] - d[1] * t1[0]};
+}
+
+sh::Vec3 Moved(const sh::Vec3& d, const sh::Vec3& t1, const sh::Vec3& t2, double u, double v) {
+  return Normalised({d[0] + u * t1[0] + v * t2[0], d[1] + u * t1[1] + v * t2[1],
+                     d[2] + u * t1[2] + v * t2[2]});
+}
+
+// Best start direction (init and the grid), then Newton steps with finite-difference derivatives
+// on the tangent plane, backtracking when a step does not lower the cost.
+sh::Vec3 FitDirection(const DirectionalProblem& problem, const sh::Vec3& init,
+                      std::span<const sh::Vec3> grid, const double* grid_basis, int iterations,
+                      double* power, double* ambient = nullptr) {
+  sh::Vec3 d = init;
+  double best = problem.CostAt(d);
+  for (size_t k = 0; k < grid.size(); ++k) {
+    const double cost = problem.Cost(grid_basis + k * problem.n);
+    if (cost < best) best = cost, d = grid[k];
+  }
+  constexpr double h = 1e-3;
+  for (int it = 0; it < iterations; ++it) {
+    sh::Vec3 t1, t2;
+    Tangents(d, t1, t2);
+    const double f0 = best;
+    const double fpu = problem.CostAt(Moved(d, t1, t2, h, 0));
+    const double fmu = problem.CostAt(Moved(d, t1, t2, -h, 0));
+    const double fpv = problem.CostAt(Moved(d, t1, t2, 0, h));
+    const double fmv = problem.CostAt(Moved(d, t1, t2, 0, -h));
+    const double fuv = problem.CostAt(Moved(d, t1, t2, h, h));
+    const double gu = (fpu - fmu) / (2 * h), gv = (fpv - fmv) / (2 * h);
+    const double huu = (fpu - 2 * f0 + fmu) / (h * h), hvv = (fpv - 2 * f0 + fmv) / (h * h);
+    const double huv = (fuv - fpu - fpv + f0) / (h * h);
+    double su, sv;
+    const double det = huu * hvv - huv * huv;
+    if (huu > 0 && det > 0) {
+      su = -(hvv * gu - huv * gv) / det;
+      sv = -(huu * gv - huv * gu) / det;
+    } else {  // not convex here: a gradient step of 0.05 rad
+      const double g = std::sqrt(gu * gu + gv * gv);
+      if (!(g > 0)) break;
+      su = -0.05 * gu / g, sv = -0.05 * gv / g;
+    }
+    const double length = std::sqrt(su * su + sv * sv);
+    if (length > 0.3) su *= 0.3 / length, sv *= 0.3 / length;
+    bool improved = false;
+    for (int back = 0; back < 6; ++back) {
+      const sh::Vec3 candidate = Moved(d, t1, t2, su, sv);
+      const double cost = problem.CostAt(candidate);
+      if (cost < f0) {
+        d = candidate, best = cost, improved = true;
+        break;
+      }
+      su *= 0.5, sv *= 0.5;
+    }
+    if (!improved || std::sqrt(su * su + sv * sv) < 1e-4) break;
+  }
+  if (power) problem.CostAt(d, power, ambient);
+  return d;
+}
+
 }  // namespace
 
 FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOptions options)
@@ -40,11 +161,15 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       options.robust_iterations < 1 || options.robust_iterations > 20 ||
       !(options.robust_threshold > 0) || options.nn_directions < 9 ||
       options.nn_directions > kMaxNnDirections || options.nn_iterations < 1 ||
-      options.nn_iterations > 10000) {
+      options.nn_iterations > 10000 || options.directional_grid < 0 ||
+      options.directional_grid > 1024 || options.directional_iterations < 0 ||
+      options.directional_iterations > 100 || !(options.direction_ridge >= 0) ||
+      !(options.directional_robust >= 0)) {
     throw FaceLightError(
-        "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor >= 0; "
-        "robust_iterations 1..20; robust_threshold > 0; nn_directions 9..1024; "
-        "nn_iterations 1..10000)");
+        "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
+        "direction_ridge, directional_robust >= 0; robust_iterations 1..20; robust_threshold > 0; nn_directions "
+        "9..1024; nn_iterations 1..10000; directional_grid 0..1024; directional_iterations "
+        "0..100)");
   }
   sample_count_ = model.SampleCount();
   exponent_ = model.intensity_exponent;
@@ -107,6 +232,31 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
     for (int n = 0; n < kN; ++n) column[n] = weights_[i] * double(rtf_[i * kN + n]);
     internal::CholeskySolve<9>(factor, column);
     for (int n = 0; n < kN; ++n) pinv_[static_cast<size_t>(n) * stride_ + i] = float(column[n]);
+  }
+  if (options.directional_fit) {
+    if (options.use_direction_rtfs && model.direction_bands > 0) {
+      dir_bands_ = model.direction_bands;
+      dir_n_ = dir_bands_ * dir_bands_;
+      dir_rtf_.assign(model.direction_rtf.begin(), model.direction_rtf.end());
+      dir_normal_.assign(static_cast<size_t>(dir_n_) * dir_n_, 0.0);
+      for (int i = 0; i < n_samples; ++i) {
+        const float* t = &dir_rtf_[static_cast<size_t>(i) * dir_n_];
+        for (int a = 0; a < dir_n_; ++a) {
+          for (int b = 0; b < dir_n_; ++b) dir_normal_[a * dir_n_ + b] += weights_[i] * double(t[a]) * t[b];
+        }
+      }
+      double dir_trace = 0;
+      for (int a = 0; a < dir_n_; ++a) dir_trace += dir_normal_[a * dir_n_ + a];
+      for (int a = 0; a < dir_n_; ++a) {
+        dir_normal_[a * dir_n_ + a] += options.direction_ridge * dir_trace / dir_n_;
+      }
+    }
+    if (options.directional_grid > 0) dir_grid_ = sh::FibonacciSphere(options.directional_grid);
+    dir_grid_basis_.resize(dir_grid_.size() * dir_n_);
+    for (size_t k = 0; k < dir_grid_.size(); ++k) {
+      sh::EvaluateBasis<double>(dir_bands_, dir_grid_[k][0], dir_grid_[k][1], dir_grid_[k][2],
+                                &dir_grid_basis_[k * dir_n_]);
+    }
   }
   if (options.non_negative) {
     const std::vector<sh::Vec3> directions = sh::FibonacciSphere(options.nn_directions);
@@ -309,7 +459,97 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
       mean_light[n] += value / 3;
     }
   }
-  const sh::Vec3 direction = sh::OptimalLinearDirection(mean_light);
+  sh::Vec3 direction = sh::OptimalLinearDirection(mean_light);
+  if (options_.directional_fit) {
+    // Cost matrix and vector of the directional fit (channel mean): E^T M E - 2 b^T E.
+    const int dn = dir_n_;
+    double m[kMaxDirN * kMaxDirN];
+    double b[kMaxDirN] = {};
+    if (dir_rtf_.empty()) {
+      if (fast) {
+        std::copy(normal_.begin(), normal_.end(), m);
+        for (int a = 0; a < kN; ++a) {
+          double sum = 0;
+          for (int k = 0; k < kN; ++k) {
+            double mean_e = 0;
+            for (int c = 0; c < channels; ++c) mean_e += e[c][k];
+            sum += normal_[a * kN + k] * mean_e / channels;
+          }
+          b[a] = sum;
+        }
+      } else {
+        for (int a = 0; a < kN; ++a) {
+          for (int k = 0; k <= a; ++k) {
+            double sum = 0;
+            for (int j = 0; j <= k; ++j) sum += factor[a * kN + j] * factor[k * kN + j];
+            m[a * kN + k] = m[k * kN + a] = sum;
+          }
+          for (int c = 0; c < channels; ++c) b[a] += rhs[c][a] / channels;
+        }
+      }
+    } else {
+      std::copy(dir_normal_.begin(), dir_normal_.end(), m);
+      for (int i = 0; i < n_samples; ++i) {
+        const float* t = &dir_rtf_[static_cast<size_t>(i) * dn];
+        const double w = weights[i];
+        if (!active[i]) {
+          for (int a = 0; a < dn; ++a) {
+            for (int k = 0; k < dn; ++k) m[a * dn + k] -= w * double(t[a]) * t[k];
+          }
+          continue;
+        }
+        const double wv = w * double(mean_value[i]);
+        for (int a = 0; a < dn; ++a) b[a] += wv * t[a];
+      }
+    }
+    const DirectionalProblem problem{m, b, dir_bands_, dn, options_.directional_ambient};
+    const sh::Vec3 init =
+        direction == sh::Vec3{0, 0, 0} ? sh::Vec3{0, 0, -1} : direction;
+    double power = 0, ambient = 0;
+    sh::Vec3 fitted = FitDirection(problem, init, dir_grid_, dir_grid_basis_.data(),
+                                   options_.directional_iterations, &power, &ambient);
+    if (options_.directional_robust > 0 && power > 0) {
+      // One round of trimming under the directional model: drop samples whose residual exceeds
+      // directional_robust * 1.4826 * MAD (cast shadows the RTFs blur, highlights), re-fit.
+      const float* t_all = dir_rtf_.empty() ? rtf_.data() : dir_rtf_.data();
+      double y[kMaxDirN];
+      sh::EvaluateBasis<double>(dir_bands_, fitted[0], fitted[1], fitted[2], y);
+      double light[kMaxDirN];
+      for (int a = 0; a < dn; ++a) light[a] = power * y[a];
+      light[0] += ambient;
+      float magnitude[kMaxSamples];
+      float dres[kMaxSamples];
+      int count = 0;
+      for (int i = 0; i < n_samples; ++i) {
+        if (!active[i]) continue;
+        const float* t = t_all + static_cast<size_t>(i) * dn;
+        double predicted = 0;
+        for (int a = 0; a < dn; ++a) predicted += t[a] * light[a];
+        dres[i] = static_cast<float>(mean_value[i] - predicted);
+        magnitude[count++] = std::abs(dres[i]);
+      }
+      std::nth_element(magnitude, magnitude + count / 2, magnitude + count);
+      const double limit = options_.directional_robust * 1.4826 * magnitude[count / 2];
+      int dropped = 0;
+      for (int i = 0; i < n_samples; ++i) {
+        if (!active[i] || !(std::abs(dres[i]) > limit)) continue;
+        const float* t = t_all + static_cast<size_t>(i) * dn;
+        const double w = weights[i];
+        for (int a = 0; a < dn; ++a) {
+          b[a] -= w * double(mean_value[i]) * t[a];
+          for (int k = 0; k < dn; ++k) m[a * dn + k] -= w * double(t[a]) * t[k];
+        }
+        ++dropped;
+      }
+      if (dropped > 0 && count - dropped >= 2 * kN) {
+        double power2 = 0;
+        const sh::Vec3 refit = FitDirection(problem, fitted, {}, nullptr,
+                                            options_.directional_iterations, &power2);
+        if (power2 > 0) fitted = refit, power = power2;
+      }
+    }
+    if (power > 0) direction = fitted;
+  }
   for (int k = 0; k < 3; ++k) out.dominant_direction[k] = static_cast<float>(direction[k]);
   out.intensity = direction == sh::Vec3{0, 0, 0}
                       ? 0.0f

@@ -214,6 +214,18 @@ void FaceLightModel::Validate() const {
   if (!(intensity_exponent > 0 && intensity_exponent <= 2)) {
     throw FaceLightError(prefix + "intensity_exponent must be in (0, 2]");
   }
+  if (direction_bands != 0 && direction_bands != 4 && direction_bands != 5) {
+    throw FaceLightError(prefix + "direction_bands " + std::to_string(direction_bands) +
+                         " must be 0, 4 or 5");
+  }
+  const size_t direction_values = positions.size() * direction_bands * direction_bands;
+  if (direction_rtf.size() != direction_values) {
+    throw FaceLightError(prefix + std::to_string(direction_rtf.size()) +
+                         " direction RTF values, expected " + std::to_string(direction_values));
+  }
+  for (float t : direction_rtf) {
+    if (!std::isfinite(t)) throw FaceLightError(prefix + "non-finite direction RTF value");
+  }
 }
 
 std::string SerializeModel(const FaceLightModel& model) {
@@ -223,6 +235,7 @@ std::string SerializeModel(const FaceLightModel& model) {
   out << "# Knorr & Kurz 2014 radiance transfer functions; see docs/face_light.md\n";
   out << "sh_convention " << sh::kConventionName << '\n';
   out << "sh_bands " << kShBands << '\n';
+  out << "direction_bands " << model.direction_bands << '\n';
   out << "frame " << kFrameName << '\n';
   out << "light_frame " << kLightFrameName << '\n';
   out << "patch_box_radius_px " << model.patch_radius_px << '\n';
@@ -235,11 +248,14 @@ std::string SerializeModel(const FaceLightModel& model) {
   out << "candidates " << model.training.candidates << '\n';
   out << "percentile " << FormatFloat(model.training.percentile) << '\n';
   out << "samples " << model.SampleCount() << '\n';
-  out << "# sample u v residual_rms t0..t8\n";
+  const int dn = model.direction_bands * model.direction_bands;
+  out << "# sample u v residual_rms t0..t8"
+      << (dn > 0 ? " d0..d" + std::to_string(dn - 1) + " (direction RTF)" : std::string()) << '\n';
   for (int i = 0; i < model.SampleCount(); ++i) {
     out << "sample " << FormatFloat(model.positions[i].x) << ' '
         << FormatFloat(model.positions[i].y) << ' ' << FormatFloat(model.residual_rms[i]);
     for (float t : model.rtf[i]) out << ' ' << FormatFloat(t);
+    for (int n = 0; n < dn; ++n) out << ' ' << FormatFloat(model.direction_rtf[i * dn + n]);
     out << '\n';
   }
   out << "end\n";
@@ -255,8 +271,8 @@ FaceLightModel ParseModel(std::string_view text, std::string_view name) {
   }
   if (words.size() != 2) reader.Fail("expected '<magic> <version>'");
   const long version = reader.Integer(words[1], "version");
-  if (version != FaceLightModel::kFormatVersion) {
-    reader.Fail("unsupported version " + std::to_string(version) + " (expected " +
+  if (version != 1 && version != FaceLightModel::kFormatVersion) {
+    reader.Fail("unsupported version " + std::to_string(version) + " (expected 1 or " +
                 std::to_string(FaceLightModel::kFormatVersion) + ")");
   }
   FaceLightModel model;
@@ -267,6 +283,14 @@ FaceLightModel ParseModel(std::string_view text, std::string_view name) {
   if (reader.Integer(reader.Field("sh_bands", 1)[0], "sh_bands") != kShBands) {
     reader.Fail("sh_bands must be 3");
   }
+  if (version >= 2) {
+    const long bands = reader.Integer(reader.Field("direction_bands", 1)[0], "direction_bands");
+    if (bands != 0 && bands != 4 && bands != 5) {
+      reader.Fail("direction_bands " + std::to_string(bands) + " must be 0, 4 or 5");
+    }
+    model.direction_bands = static_cast<int>(bands);
+  }
+  const int dn = model.direction_bands * model.direction_bands;
   if (const auto v = reader.Field("frame", 1); v[0] != kFrameName) {
     reader.Fail("frame '" + std::string(v[0]) + "' differs from '" + std::string(kFrameName) + "'");
   }
@@ -299,7 +323,7 @@ FaceLightModel ParseModel(std::string_view text, std::string_view name) {
     reader.Fail("samples " + std::to_string(samples) + " out of range 1..512");
   }
   for (long i = 0; i < samples; ++i) {
-    const std::vector<std::string_view> v = reader.Field("sample", 3 + kRtfCoefficients);
+    const std::vector<std::string_view> v = reader.Field("sample", 3 + kRtfCoefficients + dn);
     const Point2 p{reader.Real(v[0], "u"), reader.Real(v[1], "v")};
     if (!(p.x >= 0 && p.x <= 1 && p.y >= 0 && p.y <= 1)) {
       reader.Fail("sample position outside [0, 1]^2");
@@ -313,6 +337,10 @@ FaceLightModel ParseModel(std::string_view text, std::string_view name) {
     model.positions.push_back(p);
     model.residual_rms.push_back(static_cast<float>(residual));
     model.rtf.push_back(t);
+    for (int n = 0; n < dn; ++n) {
+      model.direction_rtf.push_back(
+          static_cast<float>(reader.Real(v[3 + kRtfCoefficients + n], "direction RTF coefficient")));
+    }
   }
   reader.Field("end", 0);
   model.Validate();

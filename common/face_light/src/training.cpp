@@ -35,6 +35,8 @@ double Response(double value, double exponent) {
   return exponent == 1 ? value : std::pow(std::max(value, 0.0), exponent);
 }
 
+std::vector<double> InverseAlbedos(std::span<const TrainingImage> images);
+
 }  // namespace
 
 std::vector<Point2> CandidatePositions(double step_px) {
@@ -87,23 +89,76 @@ double PersonAlbedo(std::span<const TrainingImage> images, int subject) {
                        " has no frontal-lit image (azimuth 0, elevation 0)");
 }
 
+namespace {
+std::vector<double> InverseAlbedos(std::span<const TrainingImage> images) {
+  std::set<int> subjects;
+  for (const TrainingImage& image : images) subjects.insert(image.subject);
+  std::vector<double> inverse_albedo(images.size());
+  std::vector<std::pair<int, double>> albedo;
+  for (int s : subjects) albedo.emplace_back(s, 1.0 / PersonAlbedo(images, s));
+  for (size_t i = 0; i < images.size(); ++i) {
+    for (const auto& [s, a] : albedo) {
+      if (s == images[i].subject) inverse_albedo[i] = a;
+    }
+  }
+  return inverse_albedo;
+}
+}  // namespace
+
+std::vector<double> FitDirectionRtfs(std::span<const TrainingImage> images,
+                                     std::span<const int> which, int bands,
+                                     double intensity_exponent, double ridge) {
+  CheckImages(images);
+  if (bands < 1 || bands > 5 || !(ridge >= 0)) {
+    throw FaceLightError("face_light training: direction RTF bands must be 1..5, ridge >= 0");
+  }
+  const int n = bands * bands;
+  const std::vector<double> inverse_albedo = InverseAlbedos(images);
+  std::vector<double> basis(images.size() * n);
+  for (size_t i = 0; i < images.size(); ++i) {
+    const std::array<double, 3> d =
+        YaleBLightDirection(images[i].azimuth_deg, images[i].elevation_deg);
+    sh::EvaluateBasis<double>(bands, d[0], d[1], d[2], &basis[i * n]);
+  }
+  std::vector<double> out(which.size() * n);
+  std::vector<double> normal(static_cast<size_t>(n) * n);
+  for (size_t k = 0; k < which.size(); ++k) {
+    const size_t j = static_cast<size_t>(which[k]);
+    if (j >= images.front().values.size()) {
+      throw FaceLightError("face_light training: candidate index out of range");
+    }
+    std::fill(normal.begin(), normal.end(), 0.0);
+    double* rhs = &out[k * n];
+    int equations = 0;
+    for (size_t i = 0; i < images.size(); ++i) {
+      if (!images[i].valid[j]) continue;
+      const double value = Response(images[i].values[j] * inverse_albedo[i], intensity_exponent);
+      const double* y = &basis[i * n];
+      for (int a = 0; a < n; ++a) {
+        rhs[a] += y[a] * value;
+        for (int b = 0; b <= a; ++b) normal[a * n + b] += y[a] * y[b];
+      }
+      ++equations;
+    }
+    double trace = 0;
+    for (int a = 0; a < n; ++a) trace += normal[a * n + a];
+    for (int a = 0; a < n; ++a) normal[a * n + a] += ridge * trace / n;
+    if (equations < 1 || !internal::CholeskyN(normal.data(), n)) {
+      throw FaceLightError("face_light training: candidate " + std::to_string(j) +
+                           " has no unique " + std::to_string(bands) +
+                           "-band direction RTF (raise the direction ridge)");
+    }
+    internal::CholeskySolveN(normal.data(), n, rhs);
+  }
+  return out;
+}
+
 std::vector<std::array<double, kRtfCoefficients>> FitRtfs(std::span<const TrainingImage> images,
                                                           std::vector<float>* residual_rms,
                                                           double intensity_exponent) {
   CheckImages(images);
   const size_t candidates = images.front().values.size();
-  std::set<int> subjects;
-  for (const TrainingImage& image : images) subjects.insert(image.subject);
-  std::vector<double> inverse_albedo(images.size());
-  {
-    std::vector<std::pair<int, double>> albedo;
-    for (int s : subjects) albedo.emplace_back(s, 1.0 / PersonAlbedo(images, s));
-    for (size_t i = 0; i < images.size(); ++i) {
-      for (const auto& [s, a] : albedo) {
-        if (s == images[i].subject) inverse_albedo[i] = a;
-      }
-    }
-  }
+  const std::vector<double> inverse_albedo = InverseAlbedos(images);
   std::vector<std::array<double, kRtfCoefficients>> basis(images.size());
   for (size_t i = 0; i < images.size(); ++i) {
     const std::array<double, 3> d =
@@ -185,10 +240,14 @@ std::vector<int> SelectSamples(std::span<const std::array<double, kRtfCoefficien
 FaceLightModel Train(std::span<const Point2> candidates, std::span<const TrainingImage> images,
                      const TrainingOptions& options, const std::function<void(double)>& progress) {
   if (!(options.percentile >= 0 && options.percentile < 100) || options.points < 0 ||
-      options.points > kMaxSamples || options.patch_radius_px < 0 || options.patch_radius_px > 16) {
+      options.points > kMaxSamples || options.patch_radius_px < 0 || options.patch_radius_px > 16 ||
+      (options.direction_bands != 0 && options.direction_bands != 4 &&
+       options.direction_bands != 5) ||
+      !(options.direction_ridge >= 0)) {
     throw FaceLightError(
         "face_light training: options out of range (percentile 0..<100, points "
-        "0..512, patch radius 0..16, intensity exponent (0, 2])");
+        "0..512, patch radius 0..16, intensity exponent (0, 2], direction bands 0/4/5, "
+        "direction ridge >= 0)");
   }
   CheckImages(images);
   if (images.front().values.size() != candidates.size()) {
@@ -216,6 +275,13 @@ FaceLightModel Train(std::span<const Point2> candidates, std::span<const Trainin
     for (int n = 0; n < kRtfCoefficients; ++n) t[n] = static_cast<float>(rtfs[j][n]);
     model.rtf.push_back(t);
     model.residual_rms.push_back(residuals[j]);
+  }
+  if (options.direction_bands > 0) {
+    const std::vector<double> d = FitDirectionRtfs(images, selected, options.direction_bands,
+                                                   options.intensity_exponent,
+                                                   options.direction_ridge);
+    model.direction_bands = options.direction_bands;
+    model.direction_rtf.assign(d.begin(), d.end());
   }
   std::set<int> subjects;
   for (const TrainingImage& image : images) subjects.insert(image.subject);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "probeless/face_light/model.h"
+#include "probeless/sh/sh.h"
 
 namespace probeless::msgs {
 struct ShLight;
@@ -37,6 +38,26 @@ struct EstimatorOptions {
   // Weight sample i by 1 / (residual_rms[i]^2 + weight_floor^2) (its training fit quality)
   // instead of 1; 0 = unweighted (the paper).
   double weight_floor = 0;
+  // Dominant direction by fitting ONE directional light plus a uniform ambient term,
+  // E = a Y(d) + c e_0 (a >= 0), to the samples instead of Sloan's optimal linear direction of the
+  // unconstrained light (which attached shadows bias). The fit minimises the same (prior-weighted)
+  // least-squares cost as the linear solve, evaluated in coefficient space from the 9 x 9 normal
+  // matrix (or, with a model holding direction RTFs of more bands, their normal matrix): a and c
+  // in closed form per direction, d by the best of directional_grid Fibonacci directions and the
+  // linear direction, then Newton steps on the tangent plane (directional_iterations). Only
+  // dominant_direction and intensity change; the SH coefficients stay the linear estimate.
+  bool directional_fit = true;
+  int directional_grid = 64;        // 0..1024 start directions (0 = start from the linear one)
+  int directional_iterations = 10;  // 0..100 Newton steps
+  bool directional_ambient = true;  // fit the ambient term c (false: c = 0)
+  // > 0: after the fit, drop samples whose residual under the fitted light exceeds this many
+  // robust standard deviations (1.4826 MAD) and re-fit once from the fitted direction. 0 = off.
+  double directional_robust = 0;
+  // Use the model's direction RTFs (higher SH bands, model file version 2) for the directional
+  // fit when the model has them; false = the 9-coefficient RTFs.
+  bool use_direction_rtfs = true;
+  // Tikhonov weight (relative to the mean diagonal) added to the direction RTFs' normal matrix.
+  double direction_ridge = 1e-3;
 };
 
 // One estimated light in the light frame (model.h). Units: albedo-normalised image intensity per
@@ -105,6 +126,13 @@ class FaceLightEstimator {
   std::array<double, 81> normal_{};  // T^T W T + R (full valid set)
   std::array<double, 81> prior_{};   // R
   std::vector<double> nn_basis_;     // [k * 9 + n] = Y_n(d_k)
+  // Directional fit: start directions and their basis values ([k * dir_n_ + n]).
+  std::vector<sh::Vec3> dir_grid_;
+  std::vector<double> dir_grid_basis_;
+  int dir_bands_ = 3;                 // bands of the directional fit (3, or the direction RTFs')
+  int dir_n_ = 9;                     // dir_bands_^2
+  std::vector<float> dir_rtf_;        // [i * dir_n_ + n] direction RTFs (empty: use rtf_)
+  std::vector<double> dir_normal_;    // their T^T W T + ridge (full valid set), dir_n_^2
 };
 
 // Writes an estimate into an msgs::ShLight (bands = 3, coefficients, dominant_direction,

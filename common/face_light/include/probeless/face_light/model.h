@@ -95,7 +95,8 @@ struct TrainingInfo {
 
 // A trained model: sample positions and their RTFs.
 struct FaceLightModel {
-  static constexpr int kFormatVersion = 1;
+  // 2 adds direction_bands and the direction RTFs; version-1 files still load (no direction RTFs).
+  static constexpr int kFormatVersion = 2;
   static constexpr std::string_view kMagic = "probeless_face_light_model";
 
   // Sample i: position in normalised crop coordinates.
@@ -114,14 +115,21 @@ struct FaceLightModel {
   // ratios are those of I^g.
   double intensity_exponent = 1;
   TrainingInfo training;
+  // Optional direction RTFs (format version 2): per sample, direction_bands^2 SH coefficients
+  // (bands 0..direction_bands-1, same convention) fitted like `rtf` (same albedo normalisation and
+  // exponent) but with more bands, so they follow the sharp attached shadows of a directional
+  // light better. Used only by the estimator's directional fit. 0 = none; else 4 or 5.
+  int direction_bands = 0;
+  std::vector<float> direction_rtf;  // [i * direction_bands^2 + n]
 
   int SampleCount() const { return static_cast<int>(positions.size()); }
   // Throws FaceLightError unless 1..512 samples with matching rtf / residual_rms sizes, finite
-  // values, positions inside [0, 1]^2, 0 <= patch_radius_px <= 16 and 0 < intensity_exponent <= 2.
+  // values, positions inside [0, 1]^2, 0 <= patch_radius_px <= 16, 0 < intensity_exponent <= 2 and
+  // direction_bands 0, 4 or 5 with SampleCount() * direction_bands^2 finite direction_rtf values.
   void Validate() const;
 };
 
-// The model as the text of a version-1 model file (docs/face_light.md). Deterministic: the same
+// The model as the text of a version-2 model file (docs/face_light.md). Deterministic: the same
 // model gives the same bytes; floats are written with 9 significant digits (exact round trip).
 std::string SerializeModel(const FaceLightModel& model);
 // Parses a model file's text; `name` (e.g. the path) prefixes error messages. Throws

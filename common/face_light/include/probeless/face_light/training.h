@@ -39,6 +39,11 @@ struct TrainingOptions {
   int patch_radius_px = 2;  // stored in the model: the patch the values were sampled with
   // Response exponent (FaceLightModel::intensity_exponent), 0 < g <= 2; 1 = the paper.
   double intensity_exponent = 1;
+  // Direction RTFs (FaceLightModel::direction_bands): 0 = none, 4 or 5 = also fit RTFs of that
+  // many SH bands for the selected samples (FitDirectionRtfs), with a Tikhonov weight
+  // direction_ridge relative to the mean diagonal of the normal matrix.
+  int direction_bands = 0;
+  double direction_ridge = 1e-3;
 };
 
 // Per-person albedo factor (sec. 3.4.2): the median of the subject's valid candidate values in
@@ -56,6 +61,14 @@ double PersonAlbedo(std::span<const TrainingImage> images, int subject);
 std::vector<std::array<double, kRtfCoefficients>> FitRtfs(std::span<const TrainingImage> images,
                                                           std::vector<float>* residual_rms,
                                                           double intensity_exponent = 1);
+
+// Like FitRtfs, but `bands` (1..5) SH bands and only for the candidates in `which`, with
+// ridge * (mean diagonal) * I added to each normal matrix (the Yale B lights cover the sphere
+// unevenly, so bands 3..4 are poorly determined behind the head). Returns
+// which.size() * bands^2 coefficients, [k * bands^2 + n].
+std::vector<double> FitDirectionRtfs(std::span<const TrainingImage> images,
+                                     std::span<const int> which, int bands,
+                                     double intensity_exponent, double ridge);
 
 // Indices (ascending) of the candidates kept by the selection of TrainingOptions;
 // *applied_percentile (if not null) receives the percentile in effect (for `points`, the lowest
