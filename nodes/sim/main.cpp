@@ -5,7 +5,10 @@
 //   sim SCENARIO.yaml [--out FILE.mcap] [--preview FILE.png] [--frames N] [--threads N]
 //       [--rate R] [--fast] [--loop] [--prefix /camera] [--ground-truth-prefix /groundtruth]
 //       [--lockstep NODE]... [--no-clock] [--ros-args ...]
+//   sim --yaleb-style OUT_DIR [--subjects N] [--size 168x192] [--rgb] [--behind] [--seed S]
+//       [--mesh procedural|ict] [--threads N]
 //
+// --yaleb-style renders a Yale-B-style face data set (sim/yaleb_style.h, docs/sim.md) and exits.
 // Params (launch files; the options above override them): scenario, out, preview, frames,
 // threads, rate, fast, loop, topic_prefix, ground_truth_prefix, lockstep.
 // Topics: <prefix>/image (rgb8), <prefix>/depth (depth16, mm), <prefix>/camera_info,
@@ -15,6 +18,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -25,13 +29,15 @@
 #include "probeless/replay/player.h"
 #include "probeless/replay/sources.h"
 #include "probeless/sim/simulator.h"
+#include "probeless/sim/yaleb_style.h"
 
 namespace {
 
 using namespace probeless;
 
 // Progress lines at most once a second (and at the end): "frame k/N, x fps".
-std::function<void(uint64_t, uint64_t)> ProgressPrinter(const std::string& what) {
+std::function<void(uint64_t, uint64_t)> ProgressPrinter(const std::string& what,
+                                                        const std::string& unit = "frame") {
   auto start =
       std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
   auto last = std::make_shared<std::chrono::steady_clock::time_point>(*start);
@@ -40,9 +46,9 @@ std::function<void(uint64_t, uint64_t)> ProgressPrinter(const std::string& what)
     if (done != total && now - *last < std::chrono::seconds(1)) return;
     *last = now;
     const double s = std::chrono::duration<double>(now - *start).count();
-    std::fprintf(stderr, "[info] [sim] %s: frame %llu/%llu (%.1f fps)\n", what.c_str(),
+    std::fprintf(stderr, "[info] [sim] %s: %s %llu/%llu (%.1f %s/s)\n", what.c_str(), unit.c_str(),
                  static_cast<unsigned long long>(done), static_cast<unsigned long long>(total),
-                 s > 0 ? done / s : 0.0);
+                 s > 0 ? done / s : 0.0, unit == "frame" ? "frames" : (unit + "s").c_str());
   };
 }
 
@@ -84,6 +90,50 @@ void WritePreview(sim::Scenario scenario, uint64_t frames, int threads, const st
   std::printf("sim: wrote %s (%llu frames)\n", path.c_str(), static_cast<unsigned long long>(n));
 }
 
+// sim --yaleb-style: the ICT mesh and the light list from the shared data when present.
+int WriteYaleBStyle(const std::string& out_dir, sim::YaleBStyleOptions options) {
+  if (options.mesh == "ict") {
+    const auto ict = sim::FindDataFile("meshes/ict_generic_neutral_mesh.obj");
+    if (!ict) {
+      throw node::UsageError(
+          "--mesh ict: meshes/ict_generic_neutral_mesh.obj not found in $PROBELESS_DATA or the "
+          "shared data folder");
+    }
+    options.ict_path = *ict;
+  } else if (options.mesh != "procedural") {
+    throw node::UsageError("--mesh: expected 'procedural' or 'ict', got '" + options.mesh + "'");
+  }
+  std::string light_source = "built-in Yale B table";
+  if (const auto first = sim::FindDataFile("yaleb/yaleB01/yaleB01_P00A+000E+00.pgm")) {
+    std::vector<sim::YaleBLightDirection> lights =
+        sim::YaleBLightDirectionsFromFolder(std::filesystem::path(*first).parent_path().string());
+    if (lights.size() == 64) {
+      light_source = "file names of " + std::filesystem::path(*first).parent_path().string();
+      if (options.behind) {
+        for (const auto& l : sim::BehindLightDirections()) lights.push_back(l);
+      }
+      options.lights = std::move(lights);
+    }
+  }
+  try {
+    options.Validate();
+  } catch (const sim::ScenarioError& error) {
+    throw node::UsageError(error.what());
+  }
+  std::fprintf(stderr, "[info] [sim] yaleb-style: %d subjects, %dx%d, mesh %s, lights from %s\n",
+               options.subjects, options.width, options.height, options.mesh.c_str(),
+               light_source.c_str());
+  options.progress = ProgressPrinter("yaleb-style " + out_dir, "image");
+  const auto start = std::chrono::steady_clock::now();
+  const sim::YaleBStyleSummary summary = sim::WriteYaleBStyleDataset(out_dir, options);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf(
+      "sim: wrote %llu images of %d subjects to %s in %.1f s (alignment error <= %.2f px)\n",
+      static_cast<unsigned long long>(summary.images), summary.subjects, out_dir.c_str(), s,
+      summary.max_alignment_error_px);
+  return 0;
+}
+
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "sim");
   std::string scenario_path = node.Param("scenario", "");
@@ -102,6 +152,9 @@ int Run(int argc, char** argv) {
 
   const std::vector<std::string>& args = node.args();
   bool positional_seen = false;
+  std::string yaleb_out;
+  sim::YaleBStyleOptions yaleb;
+  bool yaleb_option_seen = false;
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     auto value = [&]() -> const std::string& {
@@ -130,6 +183,31 @@ int Run(int argc, char** argv) {
       player_options.lockstep_nodes.push_back(value());
     } else if (a == "--no-clock") {
       player_options.clock_topic.clear();
+    } else if (a == "--yaleb-style") {
+      yaleb_out = value();
+    } else if (a == "--subjects") {
+      yaleb.subjects = static_cast<int>(node::ParseNumberOption(a, value()));
+      yaleb_option_seen = true;
+    } else if (a == "--size") {
+      const std::string size = value();
+      int w = 0, h = 0;
+      char tail = 0;
+      if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2) {
+        throw node::UsageError("--size: expected WIDTHxHEIGHT, got '" + size + "'");
+      }
+      yaleb.width = w;
+      yaleb.height = h;
+      yaleb_option_seen = true;
+    } else if (a == "--rgb") {
+      yaleb.rgb = yaleb_option_seen = true;
+    } else if (a == "--behind") {
+      yaleb.behind = yaleb_option_seen = true;
+    } else if (a == "--seed") {
+      yaleb.seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      yaleb_option_seen = true;
+    } else if (a == "--mesh") {
+      yaleb.mesh = value();
+      yaleb_option_seen = true;
     } else if (a.starts_with("--")) {
       throw node::UsageError("unknown option '" + a + "'");
     } else if (!positional_seen) {
@@ -140,9 +218,18 @@ int Run(int argc, char** argv) {
                              "')");
     }
   }
+  if (options.threads < 1) throw node::UsageError("--threads must be >= 1");
+  if (!yaleb_out.empty()) {
+    if (positional_seen) throw node::UsageError("--yaleb-style takes no scenario");
+    yaleb.threads = options.threads;
+    return WriteYaleBStyle(yaleb_out, yaleb);
+  }
+  if (yaleb_option_seen) {
+    throw node::UsageError(
+        "--subjects, --size, --rgb, --behind, --seed and --mesh need --yaleb-style");
+  }
   if (scenario_path.empty())
     throw node::UsageError("no scenario given (a YAML file or param 'scenario')");
-  if (options.threads < 1) throw node::UsageError("--threads must be >= 1");
   for (auto& name : player_options.lockstep_nodes) {
     if (!name.starts_with('/')) name = "/" + name;
   }
