@@ -79,6 +79,63 @@ class ReplayIntegrationTest : public ::testing::Test {
     return folder;
   }
 
+  // Records `topics` with `probeless bag record` (the recorder node) while `probeless bag play`
+  // publishes `source`; stops the recorder with SIGINT and returns `probeless bag info` of the log.
+  Result RecordWhilePlaying(const std::string& source, const std::string& play_args,
+                            const std::vector<std::string>& topics) {
+    const fs::path recorded = dir_ / "recorded.mcap";
+    const pid_t recorder = fork();
+    if (recorder == 0) {
+      const std::string probeless = kBin + "/probeless";
+      std::vector<std::string> words = {probeless, "bag", "record", "-o", recorded.string()};
+      words.insert(words.end(), topics.begin(), topics.end());
+      std::vector<char*> argv;
+      for (auto& w : words) argv.push_back(w.data());
+      argv.push_back(nullptr);
+      execv(probeless.c_str(), argv.data());
+      _exit(127);
+    }
+    struct Reaper {  // the recorder never outlives the test, whatever fails
+      pid_t pid;
+      ~Reaper() {
+        if (pid > 0 && kill(pid, SIGKILL) == 0) waitpid(pid, nullptr, 0);
+      }
+    } reaper{recorder};
+    // While it waits for its topics to appear, an idle recorder uses (almost) no CPU.
+    std::this_thread::sleep_for(1s);
+    auto cpu_seconds = [](pid_t pid) {
+      std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+      std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      std::istringstream fields(stat.substr(stat.rfind(')') + 2));
+      std::string field;
+      uint64_t utime = 0;
+      uint64_t stime = 0;
+      for (int i = 3; i <= 15 && fields >> field; ++i) {
+        if (i == 14) utime = std::stoull(field);
+        if (i == 15) stime = std::stoull(field);
+      }
+      return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+    };
+    const double idle_cpu = cpu_seconds(recorder);
+    std::this_thread::sleep_for(1s);
+    EXPECT_LT(cpu_seconds(recorder) - idle_cpu, 0.2) << "the idle recorder spins";
+    // The player creates its publishers, then waits 1 s: the recorder discovers the topics (every
+    // 250 ms) and subscribes before the first image.
+    Result r = Run(kBin + "/probeless bag play " + source + " --rate 5 --delay 1 --no-keyboard " +
+                   play_args);
+    if (r.code != 0) {
+      ADD_FAILURE() << "bag play failed: " << r.err;
+      return r;
+    }
+    std::this_thread::sleep_for(300ms);
+    kill(recorder, SIGINT);
+    int status = 0;
+    waitpid(recorder, &status, 0);
+    reaper.pid = 0;
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "recorder status " << status;
+    return Run(kBin + "/probeless bag info " + recorded.string());
+  }
+
   fs::path dir_;
 };
 
@@ -145,59 +202,27 @@ TEST_F(ReplayIntegrationTest, ConvertInfoAndPlayAFolder) {
   EXPECT_EQ(values, expected);
 }
 
-// `probeless bag record` (the recorder node) records what `probeless bag play` publishes; the
-// new log replays to the same pixels.
-TEST_F(ReplayIntegrationTest, RecordWhatIsPlayedAndPlayItAgain) {
-  const fs::path folder = WriteImageFolder(10);
-  const fs::path recorded = dir_ / "recorded.mcap";
-  const pid_t recorder = fork();
-  if (recorder == 0) {
-    const std::string probeless = kBin + "/probeless";
-    execl(probeless.c_str(), probeless.c_str(), "bag", "record", "-o", recorded.c_str(),
-          "/camera/image", "/camera/camera_info", static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  struct Reaper {  // the recorder never outlives the test, whatever fails
-    pid_t pid;
-    ~Reaper() {
-      if (pid > 0 && kill(pid, SIGKILL) == 0) waitpid(pid, nullptr, 0);
-    }
-  } reaper{recorder};
-  // While it waits for its topics to appear, an idle recorder uses (almost) no CPU.
-  std::this_thread::sleep_for(1s);
-  auto cpu_seconds = [](pid_t pid) {
-    std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-    std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    std::istringstream fields(stat.substr(stat.rfind(')') + 2));
-    std::string field;
-    uint64_t utime = 0;
-    uint64_t stime = 0;
-    for (int i = 3; i <= 15 && fields >> field; ++i) {
-      if (i == 14) utime = std::stoull(field);
-      if (i == 15) stime = std::stoull(field);
-    }
-    return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
-  };
-  const double idle_cpu = cpu_seconds(recorder);
-  std::this_thread::sleep_for(1s);
-  EXPECT_LT(cpu_seconds(recorder) - idle_cpu, 0.2) << "the idle recorder spins";
-  // The player creates its publishers, then waits 1 s: the recorder discovers the topics (every
-  // 250 ms) and subscribes before the first image.
-  Result r = Run(kBin + "/probeless bag play " + folder.string() +
-                 " --rate 5 --delay 1 --no-keyboard");
-  ASSERT_EQ(r.code, 0) << r.err;
-  std::this_thread::sleep_for(300ms);
-  kill(recorder, SIGINT);
-  int status = 0;
-  waitpid(recorder, &status, 0);
-  reaper.pid = 0;
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0);
-  r = Run(kBin + "/probeless bag info " + recorded.string());
+// `probeless bag record` records what `probeless bag play` publishes, from a folder and from a
+// simulator scenario (the synthetic world's stream through the bus and the recorder).
+TEST_F(ReplayIntegrationTest, RecordWhatIsPlayed) {
+  const Result r = RecordWhilePlaying(WriteImageFolder(10).string(), "",
+                                      {"/camera/image", "/camera/camera_info"});
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("state:     complete"));
   EXPECT_THAT(r.out, ::testing::ContainsRegex("/camera/image +10 msgs"));
   EXPECT_THAT(r.out, ::testing::ContainsRegex("/camera/camera_info +10 msgs"));
+}
+
+TEST_F(ReplayIntegrationTest, RecordWhatTheSimulatorPublishes) {
+  const Result r = RecordWhilePlaying(
+      PROBELESS_SOURCE_DIR "/data/scenarios/face_orbit.yaml", "--max-frames 6",
+      {"/camera/image", "/camera/depth", "/groundtruth/light", "/groundtruth/pose"});
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("state:     complete"));
+  for (const char* topic : {"/camera/image", "/camera/depth", "/groundtruth/pose"}) {
+    EXPECT_THAT(r.out, ::testing::ContainsRegex(std::string(topic) + " +6 msgs")) << r.out;
+  }
+  EXPECT_THAT(r.out, ::testing::ContainsRegex("/groundtruth/light +[1-6] msgs")) << r.out;
 }
 
 TEST_F(ReplayIntegrationTest, BadInputGivesOneLineErrorsAndExitCode2) {
