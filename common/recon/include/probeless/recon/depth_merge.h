@@ -1,0 +1,55 @@
+// The image-space depth merge of Gruber et al. 2015, §4, eq. 1-5: the raw sensor depth D_c and
+// the volume's raycast D_v are fused into D' (selection by lambda_D and hole filling from the
+// support regions Omega_I / Omega_D), smoothed into D'' (joint bilateral median guided by the
+// intensity image) and denoised into D''' (small median).
+//
+// Windows: a "k x k" region around p is the (2 floor(k/2) + 1)^2 pixels at offsets
+// -floor(k/2)..floor(k/2). Windows wider than 5 pixels are subsampled to 5 x 5 (offsets
+// -2s, -s, 0, s, 2s with stride s = floor(k/4)), as the paper does for D''. Medians of an even
+// count take the lower middle value (the floor((n-1)/2)-th smallest). Depths are metres, 0 =
+// missing; intensities are 0..255 grey values.
+#pragma once
+
+#include "probeless/recon/math.h"
+#include "probeless/recon/thread_pool.h"
+
+namespace probeless::recon {
+
+struct MergeOptions {
+  int merge_k = 20;           // D' support region (paper: k = 20)
+  float merge_lambda_i = 7;   // D' intensity threshold lambda_I, grey levels (paper: 7)
+  float lambda_d_m = 0.05f;   // depth threshold lambda_D, metres (paper: 5 cm)
+  int smooth_k = 8;           // D'' window (paper: k = 8, subsampled to 5 x 5)
+  float smooth_lambda_i = 7;  // D'' intensity threshold (paper: 7)
+  int denoise_k = 2;          // D''' window (paper: k = 2 -> 3 x 3, no intensity test)
+
+  // Throws ReconError for k < 1 or a negative threshold.
+  void Validate() const;
+};
+
+// The three passes' outputs (metres, 0 = missing), all the size of the inputs.
+struct MergedDepth {
+  DepthImage merged;    // D', eq. 3
+  DepthImage smoothed;  // D'', eq. 4
+  DepthImage denoised;  // D''', eq. 5 (the depth of G_r)
+};
+
+// Runs eq. 1-5. `raw` = D_c, `volume` = D_v (same camera, same size), `intensity` = I_c
+// registered to the depth. Throws ReconError if the sizes differ or an input is empty.
+// Per pixel p of D' (eq. 3):
+//   D_c(p) valid, D_v(p) valid, |D_c - D_v| >  lambda_D -> D_c(p)
+//   D_c(p) valid, D_v(p) valid, |D_c - D_v| <= lambda_D -> D_v(p)
+//   D_c(p) valid, D_v(p) missing                        -> D_c(p)
+//   D_c(p) missing, |Omega_D| >= |Omega_I| / 2 > 0 and D_v(p) valid -> D_v(p)
+//   D_c(p) missing otherwise -> median{D_c(q) : q in Omega_I(p)} (0 if Omega_I is empty)
+// with Omega_k(p) the valid D_c pixels of the window, Omega_I (eq. 1) those with
+// |I(p) - I(q)| < lambda_I and Omega_D (eq. 2) those of Omega_I with a valid D_v and
+// |D_c(q) - D_v(q)| < lambda_D.
+void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
+                const MergeOptions& options, MergedDepth& out, ThreadPool* pool);
+
+// Grey values (77 R + 150 G + 29 B) / 256 of an interleaved RGB image (3 bytes per pixel,
+// `stride` bytes per row).
+void GreyFromRgb(const uint8_t* rgb, int width, int height, size_t stride, GreyImage& out);
+
+}  // namespace probeless::recon

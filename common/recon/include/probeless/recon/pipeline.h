@@ -1,0 +1,123 @@
+// The reconstruction pipeline of one camera stream (Gruber et al. 2015 §4 on KinectFusion):
+// preprocess the depth, track the camera against the volume (ICP), integrate the depth into the
+// TSDF volume, raycast G_v in the current view, and merge raw and volume depth into G_r
+// (eq. 1-5). On a failed tracking-quality test it stops integrating, reports the loss, keeps the
+// last good pose and tries to relocalise every following frame against the model raycast from
+// that pose; Reset() starts a new map.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "probeless/recon/depth_merge.h"
+#include "probeless/recon/icp.h"
+#include "probeless/recon/math.h"
+#include "probeless/recon/preprocess.h"
+#include "probeless/recon/thread_pool.h"
+#include "probeless/recon/tsdf_volume.h"
+
+namespace probeless::recon {
+
+struct FusionOptions {
+  VolumeOptions volume;  // in the world frame, see initial_pose
+  PreprocessOptions preprocess;
+  IcpOptions icp;
+  MergeOptions merge;
+  bool merge_enabled = true;  // false: skip eq. 1-5 (G_r = nothing)
+  // Pyramid level of tracking and of the model raycast: 0 = full resolution, 1 = half (default:
+  // ICP on 320 x 240 / 160 x 120 / 80 x 60 for 640 x 480 input, G_v raycast at 320 x 240 and
+  // upsampled (nearest) to the input size for the merge). The integration always uses the
+  // full-resolution raw depth.
+  int track_level = 1;
+  int threads = 2;  // worker threads in all (>= 1)
+  // Pose of the first frame (and after Reset), camera -> world. The default volume (origin
+  // (-1, -1.2, 0.5), 2 m) then spans x in [-1, 1], y in [-1.2, 0.8] and z in [0.5, 2.5] m of the
+  // first camera.
+  Pose initial_pose;
+
+  // Throws ReconError naming the first invalid field.
+  void Validate() const;
+};
+
+enum class TrackingState {
+  kEmpty,     // no map yet (next frame initialises it)
+  kTracking,  // the last frame was tracked and integrated
+  kLost,      // the last frame failed the tracking-quality test (not integrated)
+};
+
+// Wall-clock milliseconds spent in each stage of one frame.
+struct FrameTimings {
+  double preprocess_ms = 0;  // mm -> m, bilateral filter, pyramid, vertex/normal maps
+  double icp_ms = 0;
+  double integrate_ms = 0;
+  double raycast_ms = 0;
+  double merge_ms = 0;  // eq. 1-5 and G_r normals
+  double total_ms = 0;  // all of the above
+};
+
+struct FrameResult {
+  Pose camera_to_world;  // the tracked pose, or the last good pose when lost
+  TrackingState state = TrackingState::kEmpty;
+  bool integrated = false;   // the depth was fused into the volume
+  bool relocalised = false;  // tracking resumed after a loss on this frame
+  IcpResult icp;             // empty on the first frame
+  FrameTimings timings;
+};
+
+class FusionPipeline {
+ public:
+  // Throws ReconError for invalid options.
+  explicit FusionPipeline(const FusionOptions& options);
+  ~FusionPipeline();
+
+  // Processes one frame: `depth` in metres (0 = invalid) with `intrinsics` (same size), and an
+  // optional grey intensity image of the same size registered to the depth (nullptr: no colour
+  // guidance, every lambda_I test passes). `known_pose` (camera -> world), when given, replaces
+  // tracking (external tracking or ground truth). Throws ReconError for empty or mismatched
+  // inputs or invalid intrinsics (the pipeline state is unchanged then).
+  FrameResult Process(const DepthImage& depth, const Intrinsics& intrinsics,
+                      const GreyImage* intensity, const Pose* known_pose = nullptr);
+  // Same from depth16 millimetres (`stride_elements` per row, `metres_per_unit` 0.001).
+  FrameResult ProcessDepth16(const uint16_t* depth_mm, int width, int height,
+                             size_t stride_elements, double metres_per_unit,
+                             const Intrinsics& intrinsics, const GreyImage* intensity);
+  // Forgets the map and the pose (the next frame starts at options.initial_pose).
+  void Reset();
+
+  TrackingState state() const { return state_; }
+  const Pose& pose() const { return pose_; }
+  const TsdfVolume& volume() const { return *volume_; }
+  TsdfVolume& volume() { return *volume_; }
+  // G_v of the last frame: the volume raycast at its pose (after integration), camera frame, at
+  // the tracking level's resolution (intrinsics.Level(track_level)).
+  const GeometryView& volume_view() const { return view_; }
+  // D_v at the input resolution (G_v's depth upsampled; 0 = no surface or tracking lost).
+  const DepthImage& volume_depth() const { return volume_depth_; }
+  // D', D'', D''' of the last frame (D''' = depth of G_r).
+  const MergedDepth& merged() const { return merged_; }
+  // Normals of G_r (from D''', camera frame, towards the camera; (0, 0, 0) = none).
+  const Vec3Image& merged_normals() const { return merged_normals_; }
+  // The last frame's preprocessed pyramid (raw_depth = D_c).
+  const FramePyramid& frame() const { return frame_; }
+  ThreadPool* pool() { return pool_.get(); }
+  const FusionOptions& options() const { return options_; }
+
+ private:
+  FusionOptions options_;
+  std::unique_ptr<ThreadPool> pool_;
+  std::unique_ptr<TsdfVolume> volume_;
+  TrackingState state_ = TrackingState::kEmpty;
+  Pose pose_;
+  FramePyramid frame_;
+  ModelPyramid model_;
+  GeometryView view_;
+  DepthImage volume_depth_;
+  MergedDepth merged_;
+  Vec3Image merged_vertices_;
+  Vec3Image merged_normals_;
+  DepthImage depth_scratch_;
+  GreyImage no_intensity_;
+};
+
+}  // namespace probeless::recon

@@ -1,0 +1,349 @@
+#include "probeless/recon/depth_merge.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <utility>
+#include <vector>
+
+namespace probeless::recon {
+
+namespace {
+constexpr int kTasks = 16;
+
+struct Window {
+  int half;
+  int stride;
+};
+Window WindowFor(int k) {
+  const int half = k / 2;
+  if (half <= 2) return {half, 1};
+  const int stride = std::max(1, half / 2);
+  return {2 * stride, stride};
+}
+
+// The floor((n-1)/2)-th smallest of v[0..n).
+float LowerMedian(float* v, int n) {
+  // Insertion sort: n <= 25 here.
+  for (int i = 1; i < n; ++i) {
+    const float x = v[i];
+    int j = i - 1;
+    while (j >= 0 && v[j] > x) {
+      v[j + 1] = v[j];
+      --j;
+    }
+    v[j + 1] = x;
+  }
+  return v[(n - 1) / 2];
+}
+
+// Batcher's odd-even merge sort network for `n` (a power of two) elements.
+std::vector<std::pair<int, int>> BatcherNetwork(int n) {
+  std::vector<std::pair<int, int>> pairs;
+  for (int p = 1; p < n; p <<= 1)
+    for (int k = p; k >= 1; k >>= 1)
+      for (int j = k % p; j + k < n; j += 2 * k)
+        for (int i = 0; i < std::min(k, n - j - k); ++i)
+          if ((i + j) / (2 * p) == (i + j + k) / (2 * p)) pairs.emplace_back(i + j, i + j + k);
+  return pairs;
+}
+
+// Lower medians of kLanes pixels at once: each lane's n valid samples are padded with -inf/+inf
+// so that the network's fixed middle slot holds the floor((n-1)/2)-th smallest sample; the
+// min/max compare-exchanges run over the lanes (vectorised). slots = 16 takes <= 9 samples,
+// slots = 32 <= 25.
+constexpr int kLanes = 8;
+typedef float Lanes __attribute__((vector_size(kLanes * sizeof(float))));
+class LaneMedian {
+ public:
+  explicit LaneMedian(int slots) : slots_(slots), middle_(slots / 2 - 1), v_(slots) {
+    // Keep only the compare-exchanges the middle slot depends on (walking the network backwards).
+    const std::vector<std::pair<int, int>> all = BatcherNetwork(slots);
+    std::vector<bool> needed(slots, false);
+    needed[middle_] = true;
+    for (auto it = all.rbegin(); it != all.rend(); ++it) {
+      if (needed[it->first] || needed[it->second]) {
+        needed[it->first] = needed[it->second] = true;
+        pairs_.push_back(*it);
+      }
+    }
+    std::reverse(pairs_.begin(), pairs_.end());
+  }
+  void Set(int lane, int slot, float value) { v_[slot][lane] = value; }
+  // Pads lane `lane` holding n >= 1 samples.
+  void Pad(int lane, int n) {
+    const int lo = middle_ - (n - 1) / 2;
+    int s = n;
+    for (int i = 0; i < lo; ++i) v_[s++][lane] = -1e30f;
+    while (s < slots_) v_[s++][lane] = 1e30f;
+  }
+  void Sort() {
+    Lanes* v = v_.data();
+    for (const auto& [a, b] : pairs_) {
+      const Lanes x = v[a], y = v[b];
+      const auto less = x < y;
+      v[a] = less ? x : y;
+      v[b] = less ? y : x;
+    }
+  }
+  float Median(int lane) const { return v_[middle_][lane]; }
+
+ private:
+  int slots_;
+  int middle_;
+  std::vector<std::pair<int, int>> pairs_;
+  std::vector<Lanes> v_;
+};
+
+// 8 pixels of one row at once (GCC vector extensions; AVX2 when enabled): every window sample
+// goes to a fixed slot, missing or excluded samples become +inf, a full sorting network sorts the
+// slots per lane and each lane's lower median is slot (n - 1) / 2 of its n valid samples.
+typedef float F8 __attribute__((vector_size(32)));
+typedef int I8 __attribute__((vector_size(32)));
+
+inline F8 LoadF8(const float* p) {
+  F8 v;
+  std::memcpy(&v, p, sizeof(v));
+  return v;
+}
+inline I8 LoadU8(const uint8_t* p) {
+  I8 v;
+  for (int l = 0; l < 8; ++l) v[l] = p[l];
+  return v;
+}
+
+// A sorting network for `samples` values: Batcher's for the next power of two without the
+// compare-exchanges that touch slots >= samples (those hold +inf and never move).
+std::vector<std::pair<int, int>> SortingNetwork(int samples) {
+  int n = 1;
+  while (n < samples) n <<= 1;
+  std::vector<std::pair<int, int>> pairs;
+  for (const auto& p : BatcherNetwork(n))
+    if (p.second < samples) pairs.push_back(p);
+  return pairs;
+}
+
+// Medians over the window `win` of `depth` at pixels x0..x0+7 of row y, with the joint intensity
+// test |I(p) - I(q)| < lambda_i when `intensity` is not null. Needs x0 - win.half >= 0 and
+// x0 + 7 + win.half < width, and at most Slots window samples.
+template <int Slots>
+void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lambda_i,
+                 const Window& win, const std::vector<std::pair<int, int>>& network, int x0, int y,
+                 float* out) {
+  F8 slots[Slots];
+  I8 count = {};
+  const F8 inf = F8{} + 1e30f;
+  const F8 zero = {};
+  const F8 li = F8{} + lambda_i;
+  I8 ip = {};
+  if (intensity) ip = LoadU8(&intensity->At(x0, y));
+  int s = 0;
+  for (int dy = -win.half; dy <= win.half; dy += win.stride) {
+    const int yy = y + dy;
+    if (yy < 0 || yy >= depth.height) {
+      for (int dx = -win.half; dx <= win.half; dx += win.stride) slots[s++] = inf;
+      continue;
+    }
+    const float* drow = &depth.At(0, yy);
+    const uint8_t* irow = intensity ? &intensity->At(0, yy) : nullptr;
+    for (int dx = -win.half; dx <= win.half; dx += win.stride) {
+      const F8 d = LoadF8(drow + x0 + dx);
+      I8 valid = d > zero;
+      if (intensity) {
+        I8 diff = ip - LoadU8(irow + x0 + dx);
+        diff = diff < 0 ? -diff : diff;
+        valid &= __builtin_convertvector(diff, F8) < li;
+      }
+      slots[s++] = valid ? d : inf;
+      count -= valid;
+    }
+  }
+  for (; s < Slots; ++s) slots[s] = inf;
+  for (const auto& [a, b] : network) {
+    const F8 x = slots[a], z = slots[b];
+    const I8 less = x < z;
+    slots[a] = less ? x : z;
+    slots[b] = less ? z : x;
+  }
+  for (int l = 0; l < 8; ++l) out[l] = count[l] > 0 ? slots[(count[l] - 1) / 2][l] : 0.0f;
+}
+
+template <class Fn>
+void ForRows(ThreadPool* pool, int height, Fn fn) {
+  ParallelFor(pool, kTasks, [&](int task) {
+    for (int y = height * task / kTasks; y < height * (task + 1) / kTasks; ++y) fn(y);
+  });
+}
+}  // namespace
+
+void MergeOptions::Validate() const {
+  if (merge_k < 1 || smooth_k < 1 || denoise_k < 1) {
+    throw ReconError("merge: window sizes k must be >= 1");
+  }
+  if (!(merge_lambda_i >= 0) || !(smooth_lambda_i >= 0) || !(lambda_d_m >= 0)) {
+    throw ReconError("merge: thresholds must be >= 0");
+  }
+}
+
+void GreyFromRgb(const uint8_t* rgb, int width, int height, size_t stride, GreyImage& out) {
+  out.Resize(width, height);
+  for (int y = 0; y < height; ++y) {
+    const uint8_t* row = rgb + y * stride;
+    for (int x = 0; x < width; ++x) {
+      out.At(x, y) =
+          static_cast<uint8_t>((77 * row[3 * x] + 150 * row[3 * x + 1] + 29 * row[3 * x + 2]) >> 8);
+    }
+  }
+}
+
+void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
+                const MergeOptions& options, MergedDepth& out, ThreadPool* pool) {
+  options.Validate();
+  if (raw.Empty()) throw ReconError("merge: empty raw depth");
+  if (volume.width != raw.width || volume.height != raw.height || intensity.width != raw.width ||
+      intensity.height != raw.height) {
+    throw ReconError("merge: raw depth " + std::to_string(raw.width) + "x" +
+                     std::to_string(raw.height) + ", volume depth " + std::to_string(volume.width) +
+                     "x" + std::to_string(volume.height) + " and intensity " +
+                     std::to_string(intensity.width) + "x" + std::to_string(intensity.height) +
+                     " must have the same size");
+  }
+  const int w = raw.width, h = raw.height;
+  out.merged.Resize(w, h);
+  out.smoothed.Resize(w, h);
+  out.denoised.Resize(w, h);
+  const float ld = options.lambda_d_m;
+
+  // D' (eq. 1-3).
+  {
+    const Window win = WindowFor(options.merge_k);
+    const float li = options.merge_lambda_i;
+    ForRows(pool, h, [&](int y) {
+      float samples[121];
+      for (int x = 0; x < w; ++x) {
+        const float dc = raw.At(x, y), dv = volume.At(x, y);
+        float result;
+        if (dc > 0) {
+          result = (dv > 0 && std::fabs(dc - dv) <= ld) ? dv : dc;
+        } else {
+          const int ip = intensity.At(x, y);
+          int n_i = 0, n_d = 0;
+          for (int dy = -win.half; dy <= win.half; dy += win.stride) {
+            const int yy = y + dy;
+            if (yy < 0 || yy >= h) continue;
+            for (int dx = -win.half; dx <= win.half; dx += win.stride) {
+              const int xx = x + dx;
+              if (xx < 0 || xx >= w) continue;
+              const float dq = raw.At(xx, yy);
+              if (dq <= 0) continue;                                      // Omega_k
+              if (!(std::abs(ip - intensity.At(xx, yy)) < li)) continue;  // eq. 1
+              samples[n_i++] = dq;
+              const float vq = volume.At(xx, yy);
+              if (vq > 0 && std::fabs(dq - vq) < ld) ++n_d;  // eq. 2
+            }
+          }
+          if (n_i == 0) {
+            result = 0;
+          } else if (dv > 0 && 2 * n_d >= n_i) {
+            result = dv;
+          } else {
+            result = LowerMedian(samples, n_i);
+          }
+        }
+        out.merged.At(x, y) = result;
+      }
+    });
+  }
+  // D'' (eq. 4): joint bilateral median over Omega_I on D', subsampled to 5 x 5 (<= 25 samples).
+  {
+    const Window win = WindowFor(options.smooth_k);
+    const float li = options.smooth_lambda_i;
+    const int per_side = (2 * win.half) / win.stride + 1;
+    const std::vector<std::pair<int, int>> network = SortingNetwork(per_side * per_side);
+    ForRows(pool, h, [&](int y) {
+      LaneMedian median(32);
+      int counts[kLanes];
+      for (int x0 = 0; x0 < w; x0 += kLanes) {
+        const int lanes = std::min(kLanes, w - x0);
+        if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
+          MedianBatch<32>(out.merged, &intensity, li, win, network, x0, y, &out.smoothed.At(x0, y));
+          continue;
+        }
+        for (int lane = 0; lane < kLanes; ++lane) {
+          int n = 0;
+          if (lane < lanes) {
+            const int x = x0 + lane;
+            const int ip = intensity.At(x, y);
+            for (int dy = -win.half; dy <= win.half; dy += win.stride) {
+              const int yy = y + dy;
+              if (yy < 0 || yy >= h) continue;
+              const float* drow = &out.merged.At(0, yy);
+              const uint8_t* irow = &intensity.At(0, yy);
+              for (int dx = -win.half; dx <= win.half; dx += win.stride) {
+                const int xx = x + dx;
+                if (xx < 0 || xx >= w) continue;
+                const float d = drow[xx];
+                if (d > 0 && std::abs(ip - irow[xx]) < li) median.Set(lane, n++, d);
+              }
+            }
+          }
+          counts[lane] = n;
+          if (n == 0) median.Set(lane, n++, 0.0f);
+          median.Pad(lane, n);
+        }
+        median.Sort();
+        for (int lane = 0; lane < lanes; ++lane) {
+          out.smoothed.At(x0 + lane, y) = counts[lane] > 0 ? median.Median(lane) : 0.0f;
+        }
+      }
+    });
+  }
+  // D''' (eq. 5): median over the valid pixels of a small window, no intensity test.
+  {
+    const Window win = WindowFor(options.denoise_k);
+    const int per_side = (2 * win.half) / win.stride + 1;
+    const int slots = per_side * per_side <= 9 ? 16 : 32;
+    const std::vector<std::pair<int, int>> network = SortingNetwork(per_side * per_side);
+    ForRows(pool, h, [&](int y) {
+      LaneMedian median(slots);
+      int counts[kLanes];
+      for (int x0 = 0; x0 < w; x0 += kLanes) {
+        const int lanes = std::min(kLanes, w - x0);
+        if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
+          if (slots == 16) {
+            MedianBatch<16>(out.smoothed, nullptr, 0, win, network, x0, y, &out.denoised.At(x0, y));
+          } else {
+            MedianBatch<32>(out.smoothed, nullptr, 0, win, network, x0, y, &out.denoised.At(x0, y));
+          }
+          continue;
+        }
+        for (int lane = 0; lane < kLanes; ++lane) {
+          int n = 0;
+          if (lane < lanes) {
+            const int x = x0 + lane;
+            for (int dy = -win.half; dy <= win.half; dy += win.stride) {
+              const int yy = y + dy;
+              if (yy < 0 || yy >= h) continue;
+              const float* drow = &out.smoothed.At(0, yy);
+              for (int dx = -win.half; dx <= win.half; dx += win.stride) {
+                const int xx = x + dx;
+                if (xx < 0 || xx >= w) continue;
+                if (drow[xx] > 0) median.Set(lane, n++, drow[xx]);
+              }
+            }
+          }
+          counts[lane] = n;
+          if (n == 0) median.Set(lane, n++, 0.0f);
+          median.Pad(lane, n);
+        }
+        median.Sort();
+        for (int lane = 0; lane < lanes; ++lane) {
+          out.denoised.At(x0 + lane, y) = counts[lane] > 0 ? median.Median(lane) : 0.0f;
+        }
+      }
+    });
+  }
+}
+
+}  // namespace probeless::recon

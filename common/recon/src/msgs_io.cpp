@@ -1,0 +1,133 @@
+#include "probeless/recon/msgs_io.h"
+
+#include <cmath>
+#include <cstring>
+
+#include "probeless/recon/preprocess.h"
+
+namespace probeless::recon {
+
+Intrinsics IntrinsicsFromCameraInfo(const msgs::CameraInfo& info) {
+  if (!std::isfinite(info.fx) || !std::isfinite(info.fy) || !std::isfinite(info.cx) ||
+      !std::isfinite(info.cy)) {
+    throw ReconError("camera_info: intrinsics must be finite (fx, fy, cx, cy)");
+  }
+  if (info.distortion_model != msgs::DistortionModel::kNone) {
+    for (uint32_t i = 0; i < info.distortion_count && i < msgs::kMaxDistortionCoefficients; ++i) {
+      if (info.distortion[i] != 0) {
+        throw ReconError("camera_info: lens distortion is not supported (rectify the depth)");
+      }
+    }
+  }
+  Intrinsics k;
+  k.width = static_cast<int>(info.width);
+  k.height = static_cast<int>(info.height);
+  k.fx = static_cast<float>(info.fx);
+  k.fy = static_cast<float>(info.fy);
+  k.cx = static_cast<float>(info.cx);
+  k.cy = static_cast<float>(info.cy);
+  k.Validate("camera_info");
+  return k;
+}
+
+void DepthFromImage(const msgs::Image& image, std::span<const std::byte> payload,
+                    double metres_per_unit, float min_m, float max_m, DepthImage& out) {
+  if (image.encoding != msgs::Encoding::kDepth16 && image.encoding != msgs::Encoding::kFloat32) {
+    throw ReconError("depth: expected encoding depth16 or float32, got " +
+                     std::string(msgs::EncodingName(image.encoding)));
+  }
+  if (image.width == 0 || image.height == 0) {
+    throw ReconError("depth: empty image (" + std::to_string(image.width) + "x" +
+                     std::to_string(image.height) + ")");
+  }
+  try {
+    image.Validate(payload.size());
+  } catch (const std::exception& e) {
+    throw ReconError(std::string("depth: ") + e.what());
+  }
+  if (image.encoding == msgs::Encoding::kDepth16) {
+    const double scale = metres_per_unit > 0 ? metres_per_unit : 0.001;
+    DepthFromUnits(reinterpret_cast<const uint16_t*>(payload.data()), static_cast<int>(image.width),
+                   static_cast<int>(image.height), image.step / 2, scale, min_m, max_m, out);
+    return;
+  }
+  out.Resize(static_cast<int>(image.width), static_cast<int>(image.height));
+  for (uint32_t y = 0; y < image.height; ++y) {
+    const float* row = reinterpret_cast<const float*>(payload.data() + y * image.step);
+    for (uint32_t x = 0; x < image.width; ++x) {
+      const float d = row[x];
+      out.At(x, y) = (std::isfinite(d) && d >= min_m && d <= max_m) ? d : 0.0f;
+    }
+  }
+}
+
+void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, GreyImage& out) {
+  if (image.encoding != msgs::Encoding::kRgb8 && image.encoding != msgs::Encoding::kBgr8 &&
+      image.encoding != msgs::Encoding::kMono8) {
+    throw ReconError("image: expected encoding rgb8, bgr8 or mono8, got " +
+                     std::string(msgs::EncodingName(image.encoding)));
+  }
+  if (image.width == 0 || image.height == 0) throw ReconError("image: empty image");
+  try {
+    image.Validate(payload.size());
+  } catch (const std::exception& e) {
+    throw ReconError(std::string("image: ") + e.what());
+  }
+  out.Resize(static_cast<int>(image.width), static_cast<int>(image.height));
+  const auto* data = reinterpret_cast<const uint8_t*>(payload.data());
+  for (uint32_t y = 0; y < image.height; ++y) {
+    const uint8_t* row = data + static_cast<size_t>(y) * image.step;
+    for (uint32_t x = 0; x < image.width; ++x) {
+      uint8_t g;
+      if (image.encoding == msgs::Encoding::kMono8) {
+        g = row[x];
+      } else {
+        const int r = row[3 * x + (image.encoding == msgs::Encoding::kRgb8 ? 0 : 2)];
+        const int b = row[3 * x + (image.encoding == msgs::Encoding::kRgb8 ? 2 : 0)];
+        g = static_cast<uint8_t>((77 * r + 150 * row[3 * x + 1] + 29 * b) >> 8);
+      }
+      out.At(x, y) = g;
+    }
+  }
+}
+
+void WriteGeometryBuffer(const DepthImage& depth, const Vec3Image& normals,
+                         const msgs::Image* image, std::span<const std::byte> image_payload,
+                         msgs::GeometryBuffer& out, std::span<std::byte> payload) {
+  if (normals.width != depth.width || normals.height != depth.height) {
+    throw ReconError("geometry buffer: depth and normals sizes differ");
+  }
+  out.Init(static_cast<uint32_t>(depth.width), static_cast<uint32_t>(depth.height));
+  std::span<float> d = msgs::DepthPlane(out, payload);
+  std::span<float> n = msgs::NormalsPlane(out, payload);
+  std::span<uint8_t> c = msgs::ColourPlane(out, payload);
+  std::memcpy(d.data(), depth.data.data(), d.size_bytes());
+  std::memcpy(n.data(), normals.data.data(), n.size_bytes());
+  const bool colour =
+      image != nullptr && image->width == out.width && image->height == out.height &&
+      (image->encoding == msgs::Encoding::kRgb8 || image->encoding == msgs::Encoding::kBgr8 ||
+       image->encoding == msgs::Encoding::kMono8) &&
+      image_payload.size() >= image->PayloadBytes();
+  if (!colour) {
+    std::memset(c.data(), 0, c.size());
+    return;
+  }
+  const auto* src = reinterpret_cast<const uint8_t*>(image_payload.data());
+  for (uint32_t y = 0; y < out.height; ++y) {
+    const uint8_t* row = src + static_cast<size_t>(y) * image->step;
+    uint8_t* dst = c.data() + static_cast<size_t>(y) * out.width * 3;
+    for (uint32_t x = 0; x < out.width; ++x) {
+      if (image->encoding == msgs::Encoding::kMono8) {
+        dst[3 * x] = dst[3 * x + 1] = dst[3 * x + 2] = row[x];
+      } else if (image->encoding == msgs::Encoding::kRgb8) {
+        std::memcpy(dst + 3 * x, row + 3 * x, 3);
+      } else {
+        dst[3 * x] = row[3 * x + 2];
+        dst[3 * x + 1] = row[3 * x + 1];
+        dst[3 * x + 2] = row[3 * x];
+      }
+    }
+  }
+}
+
+}  // namespace probeless::recon

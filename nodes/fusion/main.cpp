@@ -1,0 +1,235 @@
+// fusion: real-time CPU KinectFusion and the image-space depth merge (Gruber et al. 2015 §4) as a
+// node. Subscribes camera/depth (depth16 or float32), camera/image (rgb8, bgr8 or mono8; used as
+// the merge's intensity guidance, assumed registered to the depth), camera/camera_info and
+// ~/reset (any probeless_msgs/Header: forget the map). Publishes scene/gbuffer (G_r: merged depth,
+// normals, colour; GeometryBuffer in the depth camera's frame) and scene/pose (camera -> world,
+// parent param world_frame) for every tracked frame; when tracking is lost the pose is not
+// published, the loss is logged and G_r carries the raw depth merged without the volume.
+//
+// Params: volume_size (2.0 m), volume_resolution (256), volume_origin ([-1, -1.2, 0.5] m, in the
+// first camera's frame), truncation (0.03 m), max_weight (64), threads (2), depth_min (0.3),
+// depth_max (4.0), merge (true), merge_k (20), lambda_i (7), lambda_d (0.05 m), smooth_k (8),
+// smooth_lambda_i (7), denoise_k (2), icp_iterations ([4, 5, 10], fine to coarse), mesh_out (""
+// or a .ply path written at shutdown), world_frame ("world"). Reset: publish any
+// probeless_msgs/Header on ~/reset (/fusion/reset).
+//
+// A frame is processed when its depth and its image (same header.stamp_ns) have both arrived, or
+// on the depth alone when no image with that stamp comes before the next depth. Exit: 0 on
+// SIGINT/SIGTERM, 2 on bad params, 1 otherwise.
+#include <chrono>
+#include <cstdio>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+#include "probeless/recon/msgs_io.h"
+#include "probeless/recon/pipeline.h"
+
+namespace {
+
+using namespace probeless;
+
+struct PendingDepth {
+  int64_t stamp_ns = 0;
+  recon::DepthImage depth;
+  recon::Intrinsics intrinsics;
+  msgs::Header header;
+};
+
+struct PendingImage {
+  int64_t stamp_ns = 0;
+  msgs::Image image;
+  std::vector<std::byte> payload;
+  recon::GreyImage grey;
+};
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "fusion");
+  recon::FusionOptions options;
+  options.volume.size_m = static_cast<float>(node.Param("volume_size", 2.0));
+  options.volume.resolution = node.Param("volume_resolution", 256);
+  const std::vector<double> origin =
+      node.Param("volume_origin", std::vector<double>{-1, -1.2, 0.5});
+  if (origin.size() != 3) throw node::NodeError("fusion: param volume_origin needs 3 values");
+  options.volume.origin = {static_cast<float>(origin[0]), static_cast<float>(origin[1]),
+                           static_cast<float>(origin[2])};
+  options.volume.truncation_m = static_cast<float>(node.Param("truncation", 0.03));
+  options.volume.max_weight = node.Param("max_weight", 64);
+  options.threads = node.Param("threads", 2);
+  options.preprocess.depth_min_m = static_cast<float>(node.Param("depth_min", 0.3));
+  options.preprocess.depth_max_m = static_cast<float>(node.Param("depth_max", 4.0));
+  options.merge_enabled = node.Param("merge", true);
+  options.merge.merge_k = node.Param("merge_k", 20);
+  options.merge.merge_lambda_i = static_cast<float>(node.Param("lambda_i", 7.0));
+  options.merge.lambda_d_m = static_cast<float>(node.Param("lambda_d", 0.05));
+  options.merge.smooth_k = node.Param("smooth_k", 8);
+  options.merge.smooth_lambda_i = static_cast<float>(node.Param("smooth_lambda_i", 7.0));
+  options.merge.denoise_k = node.Param("denoise_k", 2);
+  options.icp.iterations.clear();
+  for (int64_t n : node.Param("icp_iterations", std::vector<int64_t>{4, 5, 10})) {
+    options.icp.iterations.push_back(static_cast<int>(n));
+  }
+  const std::string mesh_out = node.Param("mesh_out", "");
+  const std::string world_frame = node.Param("world_frame", "world");
+  recon::FusionPipeline pipeline(options);
+  for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
+
+  bus::Subscriber depth_sub = node.CreateSubscriber<msgs::Image>("camera/depth");
+  bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
+  bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
+  bus::Subscriber reset_sub = node.CreateSubscriber<msgs::Header>("~/reset");
+  std::optional<bus::Publisher> gbuffer_pub;
+  uint32_t gbuffer_w = 0, gbuffer_h = 0;
+  bus::Publisher pose_pub = node.CreatePublisher<msgs::Pose>("scene/pose");
+
+  std::optional<msgs::CameraInfo> info;
+  std::optional<PendingDepth> pending_depth;
+  std::optional<PendingImage> last_image;
+  uint64_t frames = 0, lost_frames = 0;
+  std::vector<double> total_ms;
+
+  auto process = [&](PendingDepth& d, const PendingImage* image) {
+    const recon::GreyImage* grey = nullptr;
+    if (image != nullptr && image->grey.width == d.depth.width &&
+        image->grey.height == d.depth.height) {
+      grey = &image->grey;
+    }
+    const recon::FrameResult r = pipeline.Process(d.depth, d.intrinsics, grey);
+    ++frames;
+    total_ms.push_back(r.timings.total_ms);
+    if (r.state == recon::TrackingState::kLost) {
+      ++lost_frames;
+      node.Warn() << "tracking lost at frame " << frames << ": " << r.icp.failure
+                  << " (not integrating; relocalising against the last good pose)";
+    } else {
+      if (r.relocalised) node.Info() << "relocalised at frame " << frames;
+      bus::Loan loan = pose_pub.Borrow(sizeof(msgs::Pose));
+      auto out = msgs::WriteMessage<msgs::Pose>(loan.data());
+      out->header = d.header;
+      out->SetParentFrameId(world_frame);
+      out->SetChildFrameId(d.header.FrameId());
+      out->transform = r.camera_to_world.ToMsg();
+      pose_pub.Publish(std::move(loan));
+    }
+    if (options.merge_enabled) {
+      const uint32_t w = static_cast<uint32_t>(d.depth.width),
+                     h = static_cast<uint32_t>(d.depth.height);
+      if (!gbuffer_pub || gbuffer_w != w || gbuffer_h != h) {
+        bus::PublisherOptions po;
+        po.max_message_bytes = msgs::GeometryBuffer::MessageBytesFor(w, h);
+        gbuffer_pub.reset();
+        gbuffer_pub.emplace(node.CreatePublisher<msgs::GeometryBuffer>("scene/gbuffer", po));
+        gbuffer_w = w;
+        gbuffer_h = h;
+      }
+      bus::Loan loan = gbuffer_pub->Borrow(msgs::GeometryBuffer::MessageBytesFor(w, h));
+      auto out = msgs::WriteMessage<msgs::GeometryBuffer>(loan.data());
+      out->header = d.header;
+      recon::WriteGeometryBuffer(
+          pipeline.merged().denoised, pipeline.merged_normals(), image ? &image->image : nullptr,
+          image ? std::span<const std::byte>(image->payload) : std::span<const std::byte>(), *out,
+          out.payload);
+      gbuffer_pub->Publish(std::move(loan));
+    }
+  };
+
+  auto on_depth = [&](bus::Sample&& s) {
+    const auto m = msgs::ReadMessage<msgs::Image>(s.data());
+    if (!info) {
+      node.Warn() << "depth before camera_info: skipped";
+      return;
+    }
+    // A depth still waiting for its image is processed without colour now.
+    if (pending_depth) {
+      process(*pending_depth, nullptr);
+      pending_depth.reset();
+    }
+    PendingDepth d;
+    d.stamp_ns = m->header.stamp_ns;
+    d.header = m->header;
+    d.intrinsics = recon::IntrinsicsFromCameraInfo(*info);
+    recon::DepthFromImage(*m, m.payload, info->depth_scale, options.preprocess.depth_min_m,
+                          options.preprocess.depth_max_m, d.depth);
+    if (last_image && last_image->stamp_ns == d.stamp_ns) {
+      process(d, &*last_image);
+    } else {
+      pending_depth = std::move(d);
+    }
+  };
+  auto on_image = [&](bus::Sample&& s) {
+    const auto m = msgs::ReadMessage<msgs::Image>(s.data());
+    PendingImage img;
+    img.stamp_ns = m->header.stamp_ns;
+    img.image = *m;
+    recon::GreyFromImage(*m, m.payload, img.grey);
+    img.payload.assign(m.payload.begin(), m.payload.begin() + m->PayloadBytes());
+    last_image = std::move(img);
+    if (pending_depth && pending_depth->stamp_ns == last_image->stamp_ns) {
+      process(*pending_depth, &*last_image);
+      pending_depth.reset();
+    }
+  };
+  auto guarded = [&](auto fn) {
+    return [&node, fn](bus::Sample&& s) mutable {
+      try {
+        fn(std::move(s));
+      } catch (const recon::ReconError& e) {
+        node.Error() << e.what();  // bad input: reported, frame skipped
+      } catch (const msgs::MessageError& e) {
+        node.Error() << e.what();
+      }
+    };
+  };
+  std::vector<node::Handler> handlers = {
+      {&info_sub,
+       [&](bus::Sample&& s) {
+         const auto m = msgs::ReadMessage<msgs::CameraInfo>(s.data());
+         recon::IntrinsicsFromCameraInfo(*m);  // validates
+         info = *m;
+       }},
+      {&image_sub, on_image},
+      {&depth_sub, on_depth},
+      {&reset_sub,
+       [&](bus::Sample&&) {
+         pipeline.Reset();
+         pending_depth.reset();
+         node.Info() << "reset: map cleared";
+       }},
+  };
+  for (auto& h : handlers) h.on_sample = guarded(h.on_sample);
+  node.Info() << "fusion: " << options.volume.resolution << "^3 voxels over "
+              << options.volume.size_m << " m, " << options.threads << " threads";
+  node.Spin(handlers);
+  if (pending_depth) process(*pending_depth, nullptr);
+  std::sort(total_ms.begin(), total_ms.end());
+  node.Info() << "processed " << frames << " frames, " << lost_frames << " lost, median "
+              << (total_ms.empty() ? 0.0 : total_ms[total_ms.size() / 2]) << " ms";
+  if (!mesh_out.empty()) {
+    const recon::Mesh mesh = pipeline.volume().ExtractMesh(pipeline.pool());
+    recon::WritePly(mesh, mesh_out);
+    node.Info() << "wrote " << mesh.indices.size() / 3 << " triangles to " << mesh_out;
+  }
+  std::printf("fusion: frames=%llu lost=%llu\n", static_cast<unsigned long long>(frames),
+              static_cast<unsigned long long>(lost_frames));
+  std::fflush(stdout);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const probeless::node::NodeError& e) {
+    std::fprintf(stderr, "[error] [fusion] %s\n", e.what());
+    return 2;
+  } catch (const probeless::recon::ReconError& e) {
+    std::fprintf(stderr, "[error] [fusion] %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "[error] [fusion] %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,532 @@
+// fusion_eval: measures the reconstruction pipeline.
+//
+//   fusion_eval --sevenscenes DIR [--frames A-B] [--peer opencv] [--peer-frames N] --json OUT
+//               [--mesh OUT.ply] [--threads N] [--no-merge] [--verbose]
+//   fusion_eval --sim SCENARIO [--frames A-B] --json OUT [--volume-size M] [--volume-origin X,Y,Z]
+//
+// 7-Scenes: frames are decoded up front (not timed), then tracked, integrated, raycast and merged;
+// JSON keys frames, ate_rmse_m (translation RMSE after aligning the first pose), ate_max_m,
+// tracking_lost, ms_per_frame_median (all stages incl. preprocessing), ms_preprocess_median,
+// ms_icp_median, ms_integrate_median, ms_raycast_median, ms_merge_median, threads; with
+// --peer opencv the first --peer-frames (100) frames also run through OpenCV 4.6's kinfu TSDF
+// volume (cv::kinfu::makeVolume, same 256^3 / 2 m / truncation / max weight) and
+// cv::rgbd::ICPOdometry (frame to frame, same 3-level pyramid and iterations), adding
+// peer_frames, peer_ms_per_frame_median, peer_ate_rmse_m, speedup_median. 7-Scenes colour is not
+// registered to depth: the merge uses it unregistered as intensity guidance (documented
+// approximation); tracking uses depth only. Tuning knobs for experiments (environment):
+// FUSION_EVAL_ICP=a,b,c (iterations), FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m),
+// FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m), FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE
+// (deg), FUSION_EVAL_DEPTH_SCALE (multiplies the depth). --volume-size/--volume-origin and
+// --min-inliers override the volume and the tracking-quality threshold.
+//
+// Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
+// truth poses, and reports per pass the mean absolute depth error and hole fraction of raw depth
+// (D_c), the volume (D_v) and G_r (D''') against the reference, over all pixels and over the
+// moving object ("waved_box"). Exit 0, 2 on bad options or input, 1 otherwise.
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <opencv2/rgbd.hpp>
+#include <opencv2/rgbd/volume.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "probeless/dataset/datasets.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/recon/msgs_io.h"
+#include "probeless/recon/pipeline.h"
+#include "probeless/sim/scenario.h"
+#include "probeless/sim/simulator.h"
+
+namespace {
+
+using namespace probeless;
+
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct Frame {
+  recon::DepthImage depth;
+  recon::GreyImage grey;
+  recon::Pose truth;
+};
+
+// Process CPU time (all threads), milliseconds.
+double CpuMs() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+struct Ate {
+  double rmse = 0;
+  double max = 0;
+};
+Ate ComputeAte(const std::vector<recon::Pose>& est, const std::vector<recon::Pose>& truth) {
+  Ate a;
+  if (est.empty()) return a;
+  double sum2 = 0;
+  for (size_t i = 0; i < est.size(); ++i) {
+    // Align the first pose: estimate i in the ground-truth world.
+    const recon::Pose aligned = truth[0] * est[0].Inverse() * est[i];
+    const double dx = aligned.t[0] - truth[i].t[0], dy = aligned.t[1] - truth[i].t[1],
+                 dz = aligned.t[2] - truth[i].t[2];
+    const double e = std::sqrt(dx * dx + dy * dy + dz * dz);
+    sum2 += e * e;
+    a.max = std::max(a.max, e);
+  }
+  a.rmse = std::sqrt(sum2 / est.size());
+  return a;
+}
+
+std::vector<Frame> LoadSevenScenes(const std::string& dir, int first, int last,
+                                   recon::Intrinsics* k) {
+  dataset::DatasetOptions options;
+  options.max_frames = last > 0 ? static_cast<uint64_t>(last + 1) : 0;
+  auto source = dataset::OpenDataset("7scenes:" + dir, options);
+  std::vector<Frame> frames;
+  Frame current;
+  int index = 0;
+  bool have_depth = false, have_pose = false, have_image = false;
+  while (auto m = source->Next()) {
+    const std::string& topic = source->topics()[m->topic_index].topic;
+    const auto bytes = m->message.bytes();
+    if (topic == "/camera/camera_info") {
+      *k =
+          recon::IntrinsicsFromCameraInfo(*reinterpret_cast<const msgs::CameraInfo*>(bytes.data()));
+    } else if (topic == "/camera/depth") {
+      recon::DepthFromImage(*reinterpret_cast<const msgs::Image*>(bytes.data()),
+                            bytes.subspan(sizeof(msgs::Image)), 0.001, 0.3f, 4.0f, current.depth);
+      have_depth = true;
+    } else if (topic == "/camera/image") {
+      recon::GreyFromImage(*reinterpret_cast<const msgs::Image*>(bytes.data()),
+                           bytes.subspan(sizeof(msgs::Image)), current.grey);
+      have_image = true;
+    } else if (topic == "/groundtruth/pose") {
+      current.truth =
+          recon::Pose::FromMsg(reinterpret_cast<const msgs::Pose*>(bytes.data())->transform);
+      have_pose = true;
+    }
+    if (have_depth && have_pose && have_image) {
+      if (index >= first) frames.push_back(std::move(current));
+      current = Frame{};
+      have_depth = have_pose = have_image = false;
+      ++index;
+    }
+  }
+  return frames;
+}
+
+struct PeerResult {
+  int frames = 0;
+  double ms_median = 0;
+  double cpu_ms_median = 0;
+  Ate ate;
+};
+
+// OpenCV 4.6: kinfu TSDF volume + rgbd::ICPOdometry, frame to frame.
+PeerResult RunOpenCvPeer(const std::vector<Frame>& frames, const recon::Intrinsics& k,
+                         const recon::FusionOptions& fusion) {
+  const cv::Matx33f camera(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
+  cv::Matx44f volume_pose = cv::Matx44f::eye();
+  volume_pose(0, 3) = fusion.volume.origin.x;
+  volume_pose(1, 3) = fusion.volume.origin.y;
+  volume_pose(2, 3) = fusion.volume.origin.z;
+  const int res = fusion.volume.resolution;
+  cv::Ptr<cv::kinfu::Volume> volume = cv::kinfu::makeVolume(
+      cv::kinfu::VolumeType::TSDF, fusion.volume.size_m / res, volume_pose, 0.25f,
+      fusion.volume.truncation_m, fusion.volume.max_weight, 0.0f, cv::Vec3i(res, res, res));
+  std::vector<int> iterations(fusion.icp.iterations.begin(), fusion.icp.iterations.end());
+  cv::rgbd::ICPOdometry odometry(cv::Mat(camera), 0.3f, 4.0f, 0.07f, 0.07f, iterations,
+                                 cv::rgbd::Odometry::RIGID_BODY_MOTION);
+  const cv::kinfu::Intr intr(k.fx, k.fy, k.cx, k.cy);
+  std::vector<double> ms, cpu;
+  std::vector<recon::Pose> est, truth;
+  cv::Matx44d pose = cv::Matx44d::eye();
+  cv::Mat prev_depth;
+  const cv::Mat empty;
+  for (const Frame& f : frames) {
+    cv::Mat depth(k.height, k.width, CV_32F, const_cast<float*>(f.depth.data.data()));
+    cv::Mat depth_copy = depth.clone();
+    for (int y = 0; y < depth_copy.rows; ++y)
+      for (int x = 0; x < depth_copy.cols; ++x)
+        if (depth_copy.at<float>(y, x) == 0) depth_copy.at<float>(y, x) = std::nanf("");
+    const auto t0 = std::chrono::steady_clock::now();
+    const double cpu0 = CpuMs();
+    if (!prev_depth.empty()) {
+      cv::Mat rt;
+      if (odometry.compute(empty, depth_copy, empty, empty, prev_depth, empty, rt)) {
+        pose = pose * cv::Matx44d(rt);  // rt maps current-frame points into the previous frame
+      }
+    }
+    volume->integrate(depth, 1.0f, cv::Matx44f(pose), intr);
+    cv::Mat points, normals;
+    volume->raycast(cv::Matx44f(pose), intr, cv::Size(k.width, k.height), points, normals);
+    ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    cpu.push_back(CpuMs() - cpu0);
+    prev_depth = depth_copy;
+    recon::Pose p;
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) p.r[i * 3 + j] = pose(i, j);
+      p.t[i] = pose(i, 3);
+    }
+    est.push_back(p);
+    truth.push_back(f.truth);
+  }
+  PeerResult r;
+  r.frames = static_cast<int>(frames.size());
+  r.ms_median = Median(ms);
+  r.cpu_ms_median = Median(cpu);
+  r.ate = ComputeAte(est, truth);
+  return r;
+}
+
+std::pair<int, int> ParseRange(const std::string& text) {
+  const size_t dash = text.find('-');
+  try {
+    if (dash == std::string::npos) throw std::invalid_argument(text);
+    return {std::stoi(text.substr(0, dash)), std::stoi(text.substr(dash + 1))};
+  } catch (const std::exception&) {
+    throw UsageError("--frames expects A-B (0-based, inclusive), got '" + text + "'");
+  }
+}
+
+std::string Json(const std::vector<std::pair<std::string, double>>& fields) {
+  std::ostringstream out;
+  out.precision(6);
+  out << "{\n";
+  for (size_t i = 0; i < fields.size(); ++i) {
+    out << "  \"" << fields[i].first << "\": " << fields[i].second
+        << (i + 1 < fields.size() ? ",\n" : "\n");
+  }
+  out << "}\n";
+  return out.str();
+}
+
+void WriteJson(const std::string& path, const std::string& json) {
+  std::ofstream f(path);
+  if (!f) throw UsageError("cannot write '" + path + "'");
+  f << json;
+  std::printf("%s", json.c_str());
+}
+
+int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer, int peer_frames,
+                   const std::string& json, const std::string& mesh, int threads, bool merge,
+                   bool verbose, const recon::VolumeOptions* volume, float min_inliers) {
+  recon::Intrinsics k;
+  std::vector<Frame> frames = LoadSevenScenes(dir, range.first, range.second, &k);
+  if (const char* sc = std::getenv("FUSION_EVAL_DEPTH_SCALE")) {
+    const float f = std::atof(sc);
+    for (Frame& fr : frames)
+      for (float& d : fr.depth.data) d *= f;
+  }
+  if (frames.empty()) throw UsageError("no frames in '" + dir + "'");
+  recon::FusionOptions options;
+  options.threads = threads;
+  options.merge_enabled = merge;
+  if (volume) options.volume = *volume;
+  if (min_inliers >= 0) options.icp.min_inlier_fraction = min_inliers;
+  if (const char* it = std::getenv("FUSION_EVAL_ICP")) {
+    int a, b, c;
+    if (std::sscanf(it, "%d,%d,%d", &a, &b, &c) == 3) options.icp.iterations = {a, b, c};
+  }
+  if (const char* br = std::getenv("FUSION_EVAL_BILATERAL"))
+    options.preprocess.bilateral_radius = std::atoi(br);
+  if (const char* an = std::getenv("FUSION_EVAL_ANGLE")) options.icp.max_angle_deg = std::atof(an);
+  if (const char* tl = std::getenv("FUSION_EVAL_TRACK_LEVEL")) options.track_level = std::atoi(tl);
+  if (const char* md = std::getenv("FUSION_EVAL_MAXDIST"))
+    options.icp.max_distance_m = std::atof(md);
+  if (const char* mw = std::getenv("FUSION_EVAL_MAXW")) options.volume.max_weight = std::atoi(mw);
+  if (const char* tr = std::getenv("FUSION_EVAL_TRUNC"))
+    options.volume.truncation_m = std::atof(tr);
+  recon::FusionPipeline pipeline(options);
+  std::vector<double> total, pre, icp, integ, ray, mrg, cpu;
+  std::vector<recon::Pose> est, truth;
+  int lost = 0;
+  for (const Frame& f : frames) {
+    const recon::GreyImage* grey =
+        (f.grey.width == f.depth.width && f.grey.height == f.depth.height) ? &f.grey : nullptr;
+    const double cpu0 = CpuMs();
+    const recon::FrameResult r = pipeline.Process(f.depth, k, grey);
+    cpu.push_back(CpuMs() - cpu0);
+    lost += r.state == recon::TrackingState::kLost;
+    if (verbose) {
+      const recon::Vec3f t = r.camera_to_world.Translation();
+      const recon::Pose g = frames[0].truth.Inverse() * f.truth;
+      std::vector<float> d;
+      for (float v : f.depth.data)
+        if (v > 0) d.push_back(v);
+      std::sort(d.begin(), d.end());
+      const float d10 = d.empty() ? 0 : d[d.size() / 10], d50 = d.empty() ? 0 : d[d.size() / 2],
+                  d90 = d.empty() ? 0 : d[d.size() * 9 / 10];
+      const recon::Pose ae = frames[0].truth * r.camera_to_world;
+      const double rot_err = (ae.Inverse() * f.truth).RotationAngle() * 57.2958;
+      const recon::Vec3f fwd{static_cast<float>(rot_err), 0, 0};
+      std::fprintf(stderr,
+                   "frame %zu: %s inliers %.3f rms %.4f pose %.3f %.3f %.3f truth %.3f %.3f %.3f "
+                   "fwd %.2f %.2f %.2f depth %.2f/%.2f/%.2f %s\n",
+                   est.size(), r.state == recon::TrackingState::kLost ? "LOST" : "ok",
+                   r.icp.inlier_fraction, r.icp.rms_m, t.x, t.y, t.z, g.t[0], g.t[1], g.t[2], fwd.x,
+                   fwd.y, fwd.z, d10, d50, d90, r.icp.failure.c_str());
+    }
+    total.push_back(r.timings.total_ms);
+    pre.push_back(r.timings.preprocess_ms);
+    icp.push_back(r.timings.icp_ms);
+    integ.push_back(r.timings.integrate_ms);
+    ray.push_back(r.timings.raycast_ms);
+    mrg.push_back(r.timings.merge_ms);
+    est.push_back(r.camera_to_world);
+    truth.push_back(f.truth);
+  }
+  const Ate ate = ComputeAte(est, truth);
+  std::vector<std::pair<std::string, double>> fields = {
+      {"frames", static_cast<double>(frames.size())},
+      {"ate_rmse_m", ate.rmse},
+      {"ate_max_m", ate.max},
+      {"tracking_lost", static_cast<double>(lost)},
+      {"ms_per_frame_median", Median(total)},
+      {"ms_preprocess_median", Median(pre)},
+      {"ms_icp_median", Median(icp)},
+      {"ms_integrate_median", Median(integ)},
+      {"ms_raycast_median", Median(ray)},
+      {"ms_merge_median", Median(mrg)},
+      {"threads", static_cast<double>(threads)},
+      // CPU time of the process per frame (all threads): load-independent; on an idle machine
+      // the wall time is about this / threads.
+      {"cpu_ms_per_frame_median", Median(cpu)},
+  };
+  if (!mesh.empty()) {
+    const recon::Mesh m = pipeline.volume().ExtractMesh(pipeline.pool());
+    recon::WritePly(m, mesh);
+    fields.push_back({"mesh_triangles", static_cast<double>(m.indices.size() / 3)});
+  }
+  if (peer) {
+    std::vector<Frame> subset(frames.begin(),
+                              frames.begin() + std::min<size_t>(frames.size(), peer_frames));
+    const auto t0 = std::chrono::steady_clock::now();
+    const PeerResult p = RunOpenCvPeer(subset, k, options);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::vector<double> ours(total.begin(), total.begin() + subset.size());
+    std::vector<double> ours_no_merge;
+    for (size_t i = 0; i < subset.size(); ++i) ours_no_merge.push_back(total[i] - mrg[i]);
+    fields.push_back({"peer_frames", static_cast<double>(p.frames)});
+    fields.push_back({"peer_seconds", seconds});
+    fields.push_back({"peer_ms_per_frame_median", p.ms_median});
+    fields.push_back({"peer_ate_rmse_m", p.ate.rmse});
+    fields.push_back({"peer_cpu_ms_per_frame_median", p.cpu_ms_median});
+    std::vector<double> ours_cpu(cpu.begin(), cpu.begin() + subset.size());
+    fields.push_back({"cpu_speedup_median", p.cpu_ms_median / std::max(1e-9, Median(ours_cpu))});
+    fields.push_back({"ms_per_frame_median_same_frames", Median(ours)});
+    fields.push_back({"speedup_median", p.ms_median / std::max(1e-9, Median(ours))});
+    // Like for like: the peer does no depth merge.
+    fields.push_back(
+        {"speedup_median_without_merge", p.ms_median / std::max(1e-9, Median(ours_no_merge))});
+  }
+  WriteJson(json, Json(fields));
+  return 0;
+}
+
+int RunSim(const std::string& scenario_path, std::pair<int, int> range, const std::string& json,
+           float volume_size, recon::Vec3f origin, int threads) {
+  sim::Scenario scenario = sim::LoadScenario(scenario_path);
+  uint32_t box_id = 0;
+  for (size_t i = 0; i < scenario.objects.size(); ++i) {
+    if (scenario.objects[i].name == "waved_box") {
+      box_id = scenario.objects[i].id != 0 ? scenario.objects[i].id : static_cast<uint32_t>(i + 1);
+    }
+  }
+  const int frames_total = static_cast<int>(scenario.frames);
+  const int first = std::max(0, range.first);
+  const int last = range.second > 0 ? std::min(range.second, frames_total - 1) : frames_total - 1;
+  sim::Simulator simulator(scenario, threads);
+  recon::FusionOptions options;
+  options.threads = threads;
+  options.volume.size_m = volume_size;
+  options.volume.origin = origin;
+  options.volume.truncation_m = std::max(0.03f, 4 * volume_size / options.volume.resolution);
+  options.preprocess.depth_max_m = static_cast<float>(scenario.sensor.depth_max_m);
+  recon::FusionPipeline pipeline(options);
+  // Sums over frames: absolute error and counts per source (raw, volume, merged), all pixels and
+  // the moving object.
+  struct Acc {
+    double err = 0;
+    double n = 0;
+    double holes = 0;
+    double reference = 0;
+  };
+  std::map<std::string, Acc> acc;
+  std::vector<double> merge_ms;
+  for (int i = first; i <= last; ++i) {
+    const sim::SimFrame f = simulator.Render(static_cast<uint64_t>(i));
+    recon::Intrinsics k;
+    k.width = f.camera.width;
+    k.height = f.camera.height;
+    k.fx = static_cast<float>(f.camera.fx);
+    k.fy = static_cast<float>(f.camera.fy);
+    k.cx = static_cast<float>(f.camera.cx);
+    k.cy = static_cast<float>(f.camera.cy);
+    recon::Pose pose;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) pose.r[r * 3 + c] = f.camera.camera_to_world.rotation.m[r][c];
+      pose.t[r] = f.camera.camera_to_world.translation[r];
+    }
+    recon::DepthImage depth;
+    recon::DepthFromUnits(f.depth_mm.data(), k.width, k.height, k.width, 0.001,
+                          options.preprocess.depth_min_m, options.preprocess.depth_max_m, depth);
+    recon::GreyImage grey;
+    recon::GreyFromRgb(f.rgb.data(), k.width, k.height, static_cast<size_t>(k.width) * 3, grey);
+    const recon::FrameResult r = pipeline.Process(depth, k, &grey, &pose);
+    merge_ms.push_back(r.timings.merge_ms);
+    if (i - first < 10) continue;  // let the volume converge first
+    const recon::DepthImage* sources[3] = {&depth, &pipeline.volume_depth(),
+                                           &pipeline.merged().denoised};
+    const char* names[3] = {"raw", "volume", "merged"};
+    for (size_t p = 0; p < depth.data.size(); ++p) {
+      const float ref = f.render.depth_m[p];
+      if (!(ref > options.preprocess.depth_min_m && ref < options.preprocess.depth_max_m)) continue;
+      const bool moving = box_id != 0 && f.render.object_ids[p] == box_id;
+      const bool raw_valid = depth.data[p] > 0;
+      for (int s = 0; s < 3; ++s) {
+        const float d = sources[s]->data[p];
+        // Also over the pixels where the raw depth is valid (like for like with raw).
+        if (raw_valid && d > 0) {
+          for (int region = 0; region < (moving ? 2 : 1); ++region) {
+            Acc& a = acc[std::string(names[s]) + (region == 0 ? "" : "_moving") + "_where_raw"];
+            a.err += std::fabs(d - ref);
+            a.n += 1;
+          }
+        }
+        for (int region = 0; region < (moving ? 2 : 1); ++region) {
+          Acc& a = acc[std::string(names[s]) + (region == 0 ? "" : "_moving")];
+          a.reference += 1;
+          if (d > 0) {
+            a.err += std::fabs(d - ref);
+            a.n += 1;
+          } else {
+            a.holes += 1;
+          }
+        }
+      }
+    }
+  }
+  std::vector<std::pair<std::string, double>> fields = {
+      {"frames", static_cast<double>(last - first + 1)},
+      {"evaluated_frames", static_cast<double>(std::max(0, last - first + 1 - 10))},
+      {"ms_merge_median", Median(merge_ms)},
+  };
+  for (const char* name :
+       {"raw", "volume", "merged", "raw_moving", "volume_moving", "merged_moving"}) {
+    const Acc& a = acc[name];
+    fields.push_back({std::string(name) + "_mean_abs_error_m", a.n > 0 ? a.err / a.n : 0});
+    fields.push_back(
+        {std::string(name) + "_hole_fraction", a.reference > 0 ? a.holes / a.reference : 0});
+    const Acc& c = acc[std::string(name) + "_where_raw"];
+    fields.push_back(
+        {std::string(name) + "_mean_abs_error_where_raw_valid_m", c.n > 0 ? c.err / c.n : 0});
+  }
+  WriteJson(json, Json(fields));
+  return 0;
+}
+
+int Run(int argc, char** argv) {
+  std::string sevenscenes, sim_path, json, mesh, peer;
+  std::pair<int, int> range{0, -1};
+  int peer_frames = 100, threads = 2;
+  bool merge = true, verbose = false, volume_given = false;
+  float min_inliers = -1;
+  float volume_size = 5.0f;
+  recon::Vec3f origin{-2.5f, -0.05f, -2.5f};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw UsageError(a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--sevenscenes")
+      sevenscenes = value();
+    else if (a == "--sim")
+      sim_path = value();
+    else if (a == "--frames")
+      range = ParseRange(value());
+    else if (a == "--peer")
+      peer = value();
+    else if (a == "--peer-frames")
+      peer_frames = std::stoi(value());
+    else if (a == "--json")
+      json = value();
+    else if (a == "--mesh")
+      mesh = value();
+    else if (a == "--threads")
+      threads = std::stoi(value());
+    else if (a == "--no-merge")
+      merge = false;
+    else if (a == "--verbose")
+      verbose = true;
+    else if (a == "--volume-size")
+      volume_size = std::stof(value()), volume_given = true;
+    else if (a == "--min-inliers")
+      min_inliers = std::stof(value());
+    else if (a == "--volume-origin") {
+      const std::string v = value();
+      if (std::sscanf(v.c_str(), "%f,%f,%f", &origin.x, &origin.y, &origin.z) != 3) {
+        throw UsageError("--volume-origin expects X,Y,Z");
+      }
+      volume_given = true;
+    } else
+      throw UsageError("unknown option '" + a + "'");
+  }
+  if (json.empty()) throw UsageError("--json OUT is required");
+  if (!peer.empty() && peer != "opencv") throw UsageError("--peer supports only 'opencv'");
+  if (!sevenscenes.empty() == !sim_path.empty()) {
+    throw UsageError("give exactly one of --sevenscenes DIR and --sim SCENARIO");
+  }
+  recon::VolumeOptions seven_volume;
+  if (volume_given) {
+    seven_volume.size_m = volume_size;
+    seven_volume.origin = origin;
+  }
+  if (!sevenscenes.empty()) {
+    return RunSevenScenes(sevenscenes, range, !peer.empty(), peer_frames, json, mesh, threads,
+                          merge, verbose, volume_given ? &seven_volume : nullptr, min_inliers);
+  }
+  return RunSim(sim_path, range, json, volume_size, origin, threads);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
+    return 2;
+  } catch (const probeless::dataset::DatasetError& e) {
+    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
+    return 2;
+  } catch (const probeless::recon::ReconError& e) {
+    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
+    return 1;
+  }
+}
