@@ -1,0 +1,48 @@
+// Bus-message adapters of probeless_light: msgs::GeometryBuffer + CameraInfo -> GeometryView,
+// a raw depth16 image -> a G-buffer (the node's `depth` mode), results -> msgs::ShLight and
+// msgs::TransferBuffer. Errors are LightError / msgs::MessageError with one line.
+#pragma once
+
+#include <cstddef>
+#include <span>
+#include <vector>
+
+#include "probeless/light/estimate.h"
+#include "probeless/light/transfer.h"
+#include "probeless/msgs/camera_info.h"
+#include "probeless/msgs/geometry_buffer.h"
+#include "probeless/msgs/image.h"
+#include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/transfer_buffer.h"
+
+namespace probeless::light {
+
+// Intrinsics of `info`; throws LightError if they are not finite or fx, fy <= 0 ("NaN
+// intrinsics"), or if `width` x `height` differ from the calibration's size.
+Intrinsics IntrinsicsFrom(const msgs::CameraInfo& info, int width, int height);
+
+// A view borrowing the planes of `g` (payload of its sample) with `info`'s intrinsics. Throws
+// msgs::MessageError for an invalid buffer and LightError for a size mismatch with `info`, bad
+// intrinsics or a buffer without any normal where there is depth ("missing normals").
+GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                                  const msgs::CameraInfo& info);
+
+// A G-buffer from a depth16 (or float32 metres) image: depth in metres (depth_scale of `info`,
+// 0.001 when unset for depth16), smoothed by SmoothDepth (radius width / 80) — the returned depth
+// is the smoothed one — and normals from NormalsFromDepth (step max(2, width / 160)). Throws
+// LightError for another encoding, a size mismatch or bad intrinsics.
+void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                            const msgs::CameraInfo& info, std::vector<float>* depth_m,
+                            std::vector<float>* normals);
+
+// Linear grey intensity of an rgb8 / bgr8 / mono8 image into `grey` (width * height). Throws
+// LightError for another encoding or a size other than width x height.
+void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,
+                   int height, std::vector<float>* grey);
+
+// Fills `out` (header left to the caller) with the white light of `e`: every channel gets the
+// same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,
+// confidence.
+void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale = 1.0f);
+
+}  // namespace probeless::light

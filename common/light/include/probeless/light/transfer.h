@@ -1,0 +1,168 @@
+// Per-pixel radiance transfer in spherical harmonics by screen-space directional occlusion
+// (Gruber, Ventura, Schmalstieg 2015, "Image-space illumination for augmented reality in dynamic
+// environments", §5.1 eq. 6-9), the one-bounce indirect term (§5.3 eq. 10-12) and the OursFast
+// variant (4x4 image-space subsampling, bicubic upsampling). Frames and SH: see docs/light.md and
+// probeless/sh/sh.h (the project's one SH convention).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "probeless/light/directions.h"
+
+namespace probeless::light {
+
+// Pinhole intrinsics of the main view (msgs::CameraInfo): a camera-frame point (X, Y, Z) (metres,
+// x right, y down, z forward) projects to u = fx X / Z + cx, v = fy Y / Z + cy (pixels, (0, 0) the
+// centre of the top-left pixel).
+struct Intrinsics {
+  double fx = 0;
+  double fy = 0;
+  double cx = 0;
+  double cy = 0;
+};
+
+// The filtered geometry buffer G_r of the current view, in the camera frame (borrowed spans).
+struct GeometryView {
+  int width = 0;
+  int height = 0;
+  Intrinsics intrinsics;
+  std::span<const float> depth;    // width * height, z along the optical axis in metres; 0 = none
+  std::span<const float> normals;  // 3 * width * height, unit normal (camera frame) facing the
+                                   // camera; (0, 0, 0) = none
+  // Optional 3 * width * height sRGB bytes (albedo or observed colour) used as the reflector's
+  // colour A(s_j) of the indirect term; empty = grey 1.
+  std::span<const uint8_t> colour;
+};
+
+// What an auxiliary buffer shows (documentation and logging only; every view is used the same
+// way).
+enum class AuxiliaryRole { kLeft, kRight, kTop, kLight, kOther };
+
+// An auxiliary orthographic depth view of the reconstruction (the paper's left / right / top
+// buffers and the one from the dominant light direction), so that surfaces hidden in G_r still
+// occlude. Contract (for the ray tracer in tests and for recon):
+//  - the view frame: x right, y down, z = viewing direction (into the scene), origin on the image
+//    plane; pixel (u, v) (u = column) sees the ray through view point
+//    ((u - (width - 1) / 2) * pixel_size_m, (v - (height - 1) / 2) * pixel_size_m, 0) along +z;
+//  - depth[v * width + u] = z (metres, view frame) of the first surface on that ray, 0 = none;
+//  - view_to_camera maps view-frame points to the current main camera frame:
+//    p_camera = rotation * p_view + translation, rotation row-major (recon computes it as
+//    inverse(camera pose) * view pose, both in its world frame);
+//  - normals (optional, 3 per pixel, view frame) are not used yet.
+struct OrthographicView {
+  AuxiliaryRole role = AuxiliaryRole::kOther;
+  int width = 0;
+  int height = 0;
+  float pixel_size_m = 0;
+  std::array<float, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  Vec3f translation{0, 0, 0};
+  std::span<const float> depth;
+  std::span<const float> normals;
+};
+
+// The auxiliary buffers of one frame (any number, typically left, right, top and light).
+struct AuxiliaryBuffers {
+  std::vector<OrthographicView> views;
+};
+
+struct TransferOptions {
+  int bands = 4;        // SH bands of T (1..5); 4 = 16 coefficients as in the paper
+  int directions = 32;  // N sampling directions over the sphere (8..kMaxDirections)
+  uint64_t seed = 1;    // direction jitter and the 2x2 block offsets
+  // Sample points y_j = x + omega_j * radius_m * r, r from a fixed table of 4 x N values in
+  // [0.1, 1] (one row per pixel of a 2x2 block, §5.1 "random offsets for 2x2 pixels").
+  float radius_m = 0.3f;
+  // Occluders s_j farther than this from x are ignored (SSDO range check; metres).
+  float max_occluder_distance_m = 0.6f;
+  // s_j occludes y_j when depth(s_j) < z(y_j) - (depth_bias_m + depth_bias_rel * z(y_j)).
+  float depth_bias_m = 0.01f;
+  float depth_bias_rel = 0.005f;
+  // 1 = every pixel (Ours); 4 = every 4th pixel in x and y, upsampled bicubically (OursFast).
+  int subsample = 1;
+  int threads = 2;  // worker threads (>= 1; the caller's thread is one of them)
+};
+
+// The dominant light for the indirect term: unit direction towards the light in the camera frame
+// and its irradiance on a surface facing it (msgs::ShLight dominant_direction / intensity).
+struct DominantLight {
+  Vec3f direction{0, 0, 0};
+  float intensity = 0;
+};
+
+// Output of TransferComputer::Compute, full resolution (width x height of the input).
+struct TransferResult {
+  int width = 0;
+  int height = 0;
+  int coefficient_count = 0;
+  // Pixel-major transfer vectors (msgs::TransferBuffer kInterleavedFloat32 layout): radiance
+  // towards the camera for albedo 1 = sum_n T[n] l_n, l in the camera frame; 0 where invalid.
+  std::vector<float> transfer;
+  std::vector<uint8_t> valid;  // width * height, 1 = surface with depth and normal
+  // One-bounce indirect radiance (eq. 10-12), linear RGB per pixel, for albedo 1 at the pixel
+  // (the renderer multiplies by its albedo); empty unless Compute got a DominantLight.
+  std::vector<float> indirect;
+};
+
+// Computes T (and optionally R_i) per pixel. Holds the direction set, the 2x2 offset table and
+// scratch buffers; one instance per thread of use (Compute is not re-entrant).
+class TransferComputer {
+ public:
+  // Throws LightError for invalid options (bands, directions, radius, subsample, threads).
+  explicit TransferComputer(const TransferOptions& options);
+  ~TransferComputer();
+  TransferComputer(const TransferComputer&) = delete;
+  TransferComputer& operator=(const TransferComputer&) = delete;
+
+  const TransferOptions& options() const { return options_; }
+  const DirectionSet& directions() const { return directions_; }
+
+  // T for every pixel of `g` (every options.subsample-th pixel, upsampled), visibility tested in
+  // G_r and in every auxiliary view; R_i too when `light` is given (and its intensity > 0).
+  // Throws LightError for an invalid view (sizes, missing normals, non-finite or non-positive
+  // intrinsics) or auxiliary view.
+  void Compute(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
+               TransferResult* out);
+
+ private:
+  void ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
+                   int step, int out_width, int row_begin, int row_end, float* transfer,
+                   uint8_t* valid, float* indirect) const;
+  TransferOptions options_;
+  DirectionSet directions_;
+  std::vector<float> offsets_;  // 4 x N, in [0.1, 1]
+  std::vector<float> low_transfer_, low_indirect_, row_scratch_;
+  std::vector<uint8_t> low_valid_;
+};
+
+// Throws LightError("light::<where>: ...") unless `g` is usable: width, height >= 1, depth size
+// w*h, normals size 3*w*h ("missing normals" when empty), colour empty or 3*w*h, intrinsics finite
+// with fx, fy > 0.
+void ValidateGeometryView(const GeometryView& g, const char* where);
+
+// Camera-frame unit normals (facing the camera) from a depth image (metres, 0 = none) by central
+// differences of the back-projected points `step` pixels apart (one-sided at holes); (0, 0, 0)
+// where a pixel or both neighbours on an axis are missing or the depth jumps by more than
+// max_jump_rel * step * z. Raw Kinect-like depth (quantised to ~q z^2) needs step ~4 for usable
+// normals. `normals` gets 3 * width * height values. Throws LightError for size mismatches, bad
+// intrinsics or step < 1.
+void NormalsFromDepth(std::span<const float> depth, int width, int height,
+                      const Intrinsics& intrinsics, std::vector<float>* normals,
+                      float max_jump_rel = 0.05f, int step = 1);
+
+// Edge-aware separable box filter of a depth image (metres, 0 = none) in place: each pixel becomes
+// the mean of the valid pixels within `radius` along x, then along y, whose depth is within
+// max_rel * z of its own. Holes stay holes. Quantised sensor depth (Kinect: steps ~0.0029 z^2)
+// needs it before NormalsFromDepth; the reconstruction's G_r does not. Throws LightError for a
+// size mismatch or radius < 0.
+void SmoothDepth(std::span<float> depth, int width, int height, int radius, float max_rel = 0.03f);
+
+// Linear grey intensity (mean of the linear R, G, B) of sRGB bytes: out[i] in [0, 1].
+void SrgbToLinearGrey(std::span<const uint8_t> rgb, std::vector<float>* out);
+// Linear value of one sRGB byte.
+float SrgbToLinear(uint8_t v);
+
+}  // namespace probeless::light

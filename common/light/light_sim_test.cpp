@@ -1,0 +1,76 @@
+// probeless_light on small rendered scenes (probeless_sim, noise-free and with sensor effects):
+// the dominant direction of a directional light is recovered within a bound, with and without
+// the auxiliary orthographic views, and the indirect buffer is filled.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+
+#include "probeless/light/estimate.h"
+#include "probeless/light/sim_buffers.h"
+#include "probeless/light/transfer.h"
+#include "probeless/sim/scenario.h"
+#include "probeless/sim/simulator.h"
+
+namespace {
+
+using namespace probeless;
+
+// A table-top scene under one directional light (camera at 1.2 m looking down at objects).
+constexpr const char* kScenario = R"(
+name: light_table
+frames: 3
+camera:
+  width: 160
+  height: 120
+  fx: 131.25
+  fy: 131.25
+  path:
+    - {t: 0, position: [0, 1.3, -1.6], look_at: [0, 0.2, 0.3]}
+render: {shadows: true}
+sensor: {depth_noise: true, quantisation: 0.00285, depth_holes: true, color_noise: 0.004}
+environment: {constant: [0.04, 0.04, 0.04]}
+objects:
+  - {name: floor, shape: plane, size: [6, 1, 6], position: [0, 0, 0], color: [0.6, 0.6, 0.6]}
+  - {name: wall, shape: plane, size: [6, 1, 3], position: [0, 1.5, 1.5], rotation_deg: [-90, 0, 0], color: [0.7, 0.7, 0.65]}
+  - {name: box, shape: box, size: [0.4, 0.4, 0.4], position: [-0.5, 0.2, 0.3], color: [0.5, 0.5, 0.6]}
+  - {name: ball, shape: sphere, radius: 0.25, position: [0.4, 0.25, 0.1], color: [0.7, 0.6, 0.5]}
+  - {name: pillar, shape: cylinder, radius: 0.12, height: 0.8, position: [0.0, 0, 0.8], color: [0.6, 0.6, 0.6]}
+lights:
+  - {name: sun, type: directional, direction: [0.5, 1.0, -0.4], color: [1, 1, 1], intensity: 2.5}
+)";
+
+double AngleDeg(const light::Vec3f& a, const raytrace::Vec3& b) {
+  const double dot = a[0] * b.x + a[1] * b.y + a[2] * b.z;
+  return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+TEST(LightSim, DominantDirectionOnARenderedScene) {
+  sim::Simulator simulator(sim::ParseScenario(kScenario, "light_table.yaml", "."), 2);
+  const sim::SimFrame frame = simulator.Render(0);
+  for (bool sensor : {false, true}) {
+    const light::GeometryStorage g = light::GeometryFromSimFrame(frame, sensor);
+    for (bool with_aux : {false, true}) {
+      light::AuxiliaryStorage aux;
+      if (with_aux) aux = light::RenderAuxiliaryViews(simulator.scene(), frame.camera, {});
+      light::TransferComputer computer({});
+      light::TransferResult t;
+      const light::DominantLight sun{{0, -1, 0}, 1.0f};
+      computer.Compute(g.View(), aux.buffers, &sun, &t);
+      light::EstimateOptions eo;
+      eo.stride = 1;
+      const light::LightEstimate e = light::EstimateLight(t, g.grey, eo);
+      ASSERT_TRUE(e.valid);
+      const double error = AngleDeg(e.dominant_direction, frame.light.dominant_direction);
+      std::printf("sensor %d aux %d: dominant direction error %.2f deg, confidence %.2f, %d px\n",
+                  sensor, with_aux, error, e.confidence, e.pixels);
+      // Measured: 6.9 / 7.2 deg noise-free (without / with auxiliary views), 26.7 / 15.5 deg with
+      // sensor effects (one frame, normals from quantised depth; docs/light.md).
+      EXPECT_LT(error, sensor ? 35.0 : 9.0);
+      EXPECT_FALSE(t.indirect.empty());
+    }
+  }
+}
+
+}  // namespace

@@ -1,0 +1,389 @@
+// Unit tests of probeless_light on analytic G-buffers (planes, a concave corner) and synthetic
+// least-squares systems: SH weights, visibility, estimation (exact, robust, non-negative),
+// OursFast vs full, the indirect term and the boundary errors.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <numbers>
+#include <random>
+#include <string>
+
+#include "probeless/light/estimate.h"
+#include "probeless/light/messages.h"
+#include "probeless/light/transfer.h"
+#include "probeless/sh/sh.h"
+
+namespace {
+
+using namespace probeless;
+using light::Vec3f;
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+// An analytic scene seen by a 160x120 camera (fx = fy = 120): kPlane, a wall at z = 3 m facing
+// the camera; kFloor, that wall and a floor 0.5 m below the camera (y = +0.5, normal -y); kValley,
+// a concave V: z = 3 + x for x < 0 (normal (1, 0, -1)/sqrt 2) and z = 3 - x for x > 0.
+enum class Shape { kPlane, kFloor, kValley };
+struct Scene {
+  int w = 160, h = 120;
+  light::Intrinsics k{120, 120, 79.5, 59.5};
+  std::vector<float> depth, normals;
+  std::vector<uint8_t> colour;
+  explicit Scene(Shape shape) {
+    depth.assign(w * h, 0);
+    normals.assign(3 * w * h, 0);
+    colour.assign(3 * w * h, 200);
+    const float r2 = std::sqrt(0.5f);
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const double dx = (u - k.cx) / k.fx, dy = (v - k.cy) / k.fy;
+        double t = 3.0;
+        Vec3f n{0, 0, -1};
+        if (shape == Shape::kFloor && dy > 0 && 0.5 / dy < t) {
+          t = 0.5 / dy;
+          n = {0, -1, 0};
+        }
+        if (shape == Shape::kValley) {
+          if (dx < 0) {  // t dx = 3 + t... z = t, x = t dx: t = 3 + t dx
+            t = 3.0 / (1 - dx);
+            n = {r2, 0, -r2};
+          } else {
+            t = 3.0 / (1 + dx);
+            n = {-r2, 0, -r2};
+          }
+        }
+        depth[v * w + u] = static_cast<float>(t);
+        for (int c = 0; c < 3; ++c) normals[3 * (v * w + u) + c] = n[c];
+      }
+    }
+  }
+  light::GeometryView View() const { return {w, h, k, depth, normals, colour}; }
+};
+
+// Quadrature tolerance of the clamped cosine with 128 jittered directions: the kink of max(0, cos)
+// makes bands 2-3 converge slowly (measured errors: <= 0.028 for bands 0-1, <= 0.055 for 2-3;
+// the clamped-cosine coefficients are 0.28, 0.33, 0.16 and 0 for Y_00, Y_10, Y_20, Y_30).
+double Tolerance(int k) { return sh::DegreeOf(k) <= 1 ? 0.035 : 0.07; }
+
+TEST(Directions, OctahedronHullHasTwelveEdges) {
+  const std::vector<Vec3f> octa{{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+  // The octahedron's 4-point equators are coplanar, but the hull edges are still the 12 edges.
+  EXPECT_EQ(light::SphericalDelaunayEdges(octa).size(), 12u);
+}
+
+TEST(Directions, DelaunayIsATriangulationAndChiFollowsEq9) {
+  const light::DirectionSet set(64, 4, 7);
+  // A triangulation of the sphere with V vertices has 3V - 6 edges (Euler).
+  EXPECT_EQ(set.delaunay_edges().size(), 3u * 64 - 6);
+  // Mean neighbour spacing of N uniform points ~ sqrt(4 pi / N) * 1.07 (hexagonal packing).
+  const double spacing = std::sqrt(4 * std::numbers::pi / 64);
+  EXPECT_GT(set.median_neighbour_angle(), 0.8 * spacing);
+  EXPECT_LT(set.median_neighbour_angle(), 1.4 * spacing);
+  EXPECT_DOUBLE_EQ(set.chi(), std::cos(set.median_neighbour_angle() / 2));
+  // Deterministic.
+  const light::DirectionSet again(64, 4, 7);
+  EXPECT_EQ(again.directions(), set.directions());
+}
+
+TEST(Directions, WeightsIntegrateTheClampedCosine) {
+  // sum_j max(0, w_j . n) W_jn ~ (A_l / pi) Y_n(n) (Ramamoorthi-Hanrahan), for several normals.
+  const light::DirectionSet set(128, 4, 3);
+  for (const Vec3f& n : std::vector<Vec3f>{{0, 0, 1}, {0, 0, -1}, {0.6f, -0.8f, 0}}) {
+    std::vector<double> t(16, 0.0);
+    for (int j = 0; j < set.count(); ++j) {
+      const auto& d = set.directions()[j];
+      const double c = std::max(0.0f, d[0] * n[0] + d[1] * n[1] + d[2] * n[2]);
+      for (int k = 0; k < 16; ++k) t[k] += c * set.weights()[j * 16 + k];
+    }
+    const auto y = sh::Basis(4, {n[0], n[1], n[2]});
+    for (int k = 0; k < 16; ++k) {
+      const double expected =
+          sh::ClampedCosineCoefficient(sh::DegreeOf(k)) / std::numbers::pi * y[k];
+      EXPECT_NEAR(t[k], expected, Tolerance(k)) << "coefficient " << k;
+    }
+  }
+}
+
+TEST(Transfer, UnoccludedPlaneEqualsClampedCosineProjection) {
+  const Scene scene(Shape::kPlane);
+  light::TransferOptions o;
+  o.directions = 128;
+  light::TransferComputer computer(o);
+  light::TransferResult r;
+  computer.Compute(scene.View(), {}, nullptr, &r);
+  ASSERT_EQ(r.coefficient_count, 16);
+  const auto y = sh::Basis(4, {0, 0, -1});
+  for (int p : {60 * 160 + 80, 10 * 160 + 10, 100 * 160 + 150}) {
+    EXPECT_TRUE(r.valid[p]);
+    for (int k = 0; k < 16; ++k) {
+      const double expected =
+          sh::ClampedCosineCoefficient(sh::DegreeOf(k)) / std::numbers::pi * y[k];
+      EXPECT_NEAR(r.transfer[p * 16 + k], expected, Tolerance(k))
+          << "pixel " << p << " coefficient " << k;
+    }
+  }
+  // Under a uniform white light of radiance 1 the plane reflects 1 (albedo 1): T_0 Y_0^-1 ... ~ 1.
+  EXPECT_NEAR(r.transfer[(60 * 160 + 80) * 16] * 2 * std::sqrt(std::numbers::pi), 1.0, 0.03);
+}
+
+TEST(Transfer, ConcaveCornerGetsLessTransferThanOpenPlane) {
+  const Scene scene(Shape::kValley);
+  light::TransferComputer computer({});
+  light::TransferResult r;
+  computer.Compute(scene.View(), {}, nullptr, &r);
+  // The valley floor is the column u = cx; pixels 2 columns away are in the concave corner, pixels
+  // 60 columns away (about 1 m along the slope) see the open plane.
+  const int corner = 60 * 160 + 78, open = 60 * 160 + 20;
+  ASSERT_GT(scene.depth[corner], 2.9f);
+  EXPECT_LT(r.transfer[corner * 16], 0.9 * r.transfer[open * 16])
+      << "corner " << r.transfer[corner * 16] << " open " << r.transfer[open * 16];
+}
+
+TEST(Transfer, FastAgreesWithFull) {
+  const Scene scene(Shape::kValley);
+  light::TransferOptions full_o, fast_o;
+  fast_o.subsample = 4;
+  light::TransferComputer full(full_o), fast(fast_o);
+  light::TransferResult a, b;
+  full.Compute(scene.View(), {}, nullptr, &a);
+  fast.Compute(scene.View(), {}, nullptr, &b);
+  double diff = 0, norm = 0;
+  for (size_t p = 0; p < a.valid.size(); ++p) {
+    ASSERT_EQ(a.valid[p], b.valid[p]);
+    for (int k = 0; k < 4; ++k) {
+      diff += std::abs(a.transfer[p * 16 + k] - b.transfer[p * 16 + k]);
+      norm += std::abs(a.transfer[p * 16 + k]);
+    }
+  }
+  EXPECT_LT(diff / norm, 0.06) << "mean relative difference of bands 0-1";
+}
+
+TEST(Transfer, IndirectLightBouncesAcrossTheValley) {
+  const Scene scene(Shape::kValley);
+  light::TransferComputer computer({});
+  light::TransferResult r;
+  // The light faces the left slope (normal (1, 0, -1)/sqrt 2), which bounces it onto the right one.
+  const float r2 = std::sqrt(0.5f);
+  const light::DominantLight light{{r2, 0, -r2}, 3.0f};
+  computer.Compute(scene.View(), {}, &light, &r);
+  ASSERT_EQ(r.indirect.size(), 3u * 160 * 120);
+  const int corner = 60 * 160 + 82, open = 60 * 160 + 140;
+  EXPECT_GT(r.indirect[3 * corner], 1e-3);
+  EXPECT_EQ(r.indirect[3 * open], 0.0f);
+}
+
+TEST(Transfer, AuxiliaryViewOccludes) {
+  // An open plane; a top view (looking along camera +y = down) sees a slab 10 cm in front of it.
+  const Scene scene(Shape::kPlane);
+  std::vector<float> top(32 * 32, 0.0f);
+  light::OrthographicView view;
+  view.role = light::AuxiliaryRole::kTop;
+  view.width = view.height = 32;
+  view.pixel_size_m = 0.1f;
+  // View frame: x = camera x, y = camera z (z_view = +y_camera), origin 1 m above (y = -1).
+  view.rotation = {1, 0, 0, 0, 0, 1, 0, -1, 0};  // columns: x_v=(1,0,0), y_v=(0,0,-1), z_v=(0,1,0)
+  view.translation = {0, -1, 2.9f};
+  for (float& d : top) d = 0.9f;  // a horizontal slab 10 cm above the camera axis... at y = -0.1
+  light::AuxiliaryBuffers aux;
+  view.depth = top;
+  aux.views.push_back(view);
+  light::TransferComputer computer({});
+  light::TransferResult open, covered;
+  computer.Compute(scene.View(), {}, nullptr, &open);
+  computer.Compute(scene.View(), aux, nullptr, &covered);
+  const int p = 60 * 160 + 80;  // on the wall at y ~ 0, just below the slab
+  EXPECT_LT(covered.transfer[p * 16], 0.95 * open.transfer[p * 16]);
+}
+
+TEST(Normals, FromDepthOfAPlane) {
+  const Scene scene(Shape::kPlane);
+  std::vector<float> n;
+  light::NormalsFromDepth(scene.depth, scene.w, scene.h, scene.k, &n);
+  const int p = 60 * 160 + 80;
+  EXPECT_NEAR(n[3 * p + 2], -1.0f, 1e-5);
+  EXPECT_NEAR(n[3 * p], 0.0f, 1e-5);
+}
+
+std::vector<double> RandomLight(int cc, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::vector<double> l(cc);
+  for (auto& v : l) v = static_cast<double>(rng() >> 11) / 9007199254740992.0 - 0.5;
+  return l;
+}
+
+TEST(Estimate, RecoversAKnownLightExactly) {
+  const int cc = 16, m = 600;
+  std::mt19937_64 rng(5);
+  std::vector<float> rows(m * cc), targets(m);
+  const auto l = RandomLight(cc, 9);
+  for (int i = 0; i < m; ++i) {
+    double s = 0;
+    for (int k = 0; k < cc; ++k) {
+      rows[i * cc + k] =
+          static_cast<float>(static_cast<double>(rng() >> 11) / 9007199254740992.0 - 0.5);
+      s += rows[i * cc + k] * l[k];
+    }
+    targets[i] = static_cast<float>(s);
+  }
+  light::EstimateOptions o;
+  o.robust = false;
+  o.ridge = 0;
+  o.smoothness = 0;  // no prior: exact data must be reproduced exactly
+  auto e = light::SolveLight(rows, targets, cc, o);
+  ASSERT_TRUE(e.valid);
+  for (int k = 0; k < cc; ++k) EXPECT_NEAR(e.coefficients[k], l[k], 1e-5);
+  EXPECT_GT(e.confidence, 0.99f);
+  // Robust mode: 10 % gross outliers (specular highlights, wrong geometry) are ignored.
+  for (int i = 0; i < m; i += 10) targets[i] += 3.0f;
+  o.robust = true;
+  e = light::SolveLight(rows, targets, cc, o);
+  for (int k = 0; k < cc; ++k) EXPECT_NEAR(e.coefficients[k], l[k], 1e-4);
+  o.robust = false;
+  e = light::SolveLight(rows, targets, cc, o);
+  double err = 0;
+  for (int k = 0; k < cc; ++k) err = std::max(err, std::abs(e.coefficients[k] - l[k]));
+  EXPECT_GT(err, 1e-2) << "plain least squares is hurt by the outliers";
+}
+
+TEST(Estimate, DominantDirectionAndNonNegativeModeOnPlaneTransfer) {
+  // A directional light seen through the transfer of many orientations: I = T l, l = P Y(d).
+  const light::DirectionSet set(64, 4, 1);
+  const auto normals = sh::FibonacciSphere(300);
+  const sh::Vec3 d{0.3, -0.8, -0.52};
+  const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  const sh::Vec3 dn{d[0] / len, d[1] / len, d[2] / len};
+  const auto l = sh::DirectionalLight(dn, 3.0, 4);
+  std::vector<float> rows, targets;
+  for (const auto& n : normals) {
+    std::vector<double> t(16, 0);
+    for (int j = 0; j < set.count(); ++j) {
+      const auto& w = set.directions()[j];
+      const double c = std::max(0.0, w[0] * n[0] + w[1] * n[1] + w[2] * n[2]);
+      for (int k = 0; k < 16; ++k) t[k] += c * set.weights()[j * 16 + k];
+    }
+    double s = 0;
+    for (int k = 0; k < 16; ++k) {
+      rows.push_back(static_cast<float>(t[k]));
+      s += t[k] * l[k];
+    }
+    targets.push_back(static_cast<float>(s));
+  }
+  light::EstimateOptions o;
+  o.smoothness = 0;
+  o.direction_bands = 0;  // the exact 16-coefficient model: direction from the full fit
+  const auto e = light::SolveLight(rows, targets, 16, o);
+  const double dot = e.dominant_direction[0] * dn[0] + e.dominant_direction[1] * dn[1] +
+                     e.dominant_direction[2] * dn[2];
+  EXPECT_GT(dot, std::cos(2.0 * std::numbers::pi / 180));
+  o.non_negative = true;
+  const auto nn = light::SolveLight(rows, targets, 16, o);
+  double most_negative = 0;
+  for (const auto& w : sh::FibonacciSphere(64)) {
+    most_negative = std::min(most_negative, sh::Evaluate(nn.coefficients, w));
+  }
+  double plain_negative = 0;
+  for (const auto& w : sh::FibonacciSphere(64)) {
+    plain_negative = std::min(plain_negative, sh::Evaluate(e.coefficients, w));
+  }
+  EXPECT_GT(most_negative, 0.5 * plain_negative - 1e-9);
+}
+
+TEST(Messages, GeometryBufferAndShLightRoundTrip) {
+  // The node's gbuffer path: planes copied into a msgs::GeometryBuffer give the same transfer.
+  const Scene scene(Shape::kValley);
+  msgs::GeometryBuffer g;
+  g.Init(160, 120);
+  std::vector<std::byte> storage(msgs::GeometryBuffer::StandardPayloadBytes(160, 120) + 64);
+  std::span<std::byte> payload(storage.data(),
+                               msgs::GeometryBuffer::StandardPayloadBytes(160, 120));
+  std::ranges::copy(scene.depth, msgs::DepthPlane(g, payload).begin());
+  std::ranges::copy(scene.normals, msgs::NormalsPlane(g, payload).begin());
+  std::ranges::copy(scene.colour, msgs::ColourPlane(g, payload).begin());
+  msgs::CameraInfo info;
+  info.width = 160;
+  info.height = 120;
+  info.fx = info.fy = 120;
+  info.cx = 79.5;
+  info.cy = 59.5;
+  const light::GeometryView view = light::ViewOfGeometryBuffer(g, payload, info);
+  light::TransferComputer computer({});
+  light::TransferResult a, b;
+  computer.Compute(view, {}, nullptr, &a);
+  computer.Compute(scene.View(), {}, nullptr, &b);
+  EXPECT_EQ(a.transfer, b.transfer);
+  // Deterministic: the same input gives bit-identical output, whatever the thread count.
+  light::TransferOptions one;
+  one.threads = 1;
+  light::TransferComputer single(one);
+  light::TransferResult c;
+  single.Compute(scene.View(), {}, nullptr, &c);
+  EXPECT_EQ(b.transfer, c.transfer);
+  light::LightEstimate e;
+  e.bands = 2;
+  e.coefficients = {1.0, -0.5, 0.25, 0.125};
+  e.dominant_direction = {0, -1, 0};
+  e.intensity = 2;
+  e.confidence = 1.5f;
+  msgs::ShLight out;
+  light::FillShLight(e, &out);
+  EXPECT_EQ(out.bands, 2u);
+  EXPECT_EQ(out.coefficients[1][2], -0.5f);
+  EXPECT_EQ(out.coefficients[4][0], 0.0f);
+  EXPECT_EQ(out.confidence, 1.0f);
+  out.Validate();
+}
+
+TEST(Errors, BadInputsGiveOneLineMessages) {
+  Scene scene(Shape::kPlane);
+  light::TransferComputer computer({});
+  light::TransferResult r;
+  auto view = scene.View();
+  view.depth = std::span<const float>(scene.depth.data(), 100);
+  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+            "light::TransferComputer::Compute: depth has 100 values, expected 160x120");
+  view = scene.View();
+  view.normals = {};
+  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+            "light::TransferComputer::Compute: missing normals");
+  view = scene.View();
+  view.intrinsics.fx = std::nan("");
+  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+            "light::TransferComputer::Compute: non-finite intrinsics");
+  light::TransferOptions bad;
+  bad.directions = 4;
+  EXPECT_EQ(ErrorOf([&] { light::TransferComputer c(bad); }),
+            "light::DirectionSet: directions must be 8..256, got 4");
+  computer.Compute(scene.View(), {}, nullptr, &r);
+  std::vector<float> grey(10);
+  EXPECT_EQ(ErrorOf([&] { light::EstimateLight(r, grey, {}); }),
+            "light::EstimateLight: intensity has 10 values, transfer is 160x120");
+  // Message adapters.
+  msgs::CameraInfo info;
+  info.width = 160;
+  info.height = 120;
+  info.fx = std::nan("");
+  info.fy = 120;
+  EXPECT_EQ(ErrorOf([&] { light::IntrinsicsFrom(info, 160, 120); }),
+            "light::IntrinsicsFrom: camera info has non-finite intrinsics");
+  info.fx = 120;
+  EXPECT_EQ(ErrorOf([&] { light::IntrinsicsFrom(info, 320, 240); }),
+            "light::IntrinsicsFrom: camera info is 160x120, buffer is 320x240");
+  msgs::GeometryBuffer g;
+  g.Init(160, 120);
+  std::vector<std::byte> payload(msgs::GeometryBuffer::StandardPayloadBytes(160, 120));
+  auto depth = msgs::DepthPlane(g, std::span<std::byte>(payload));
+  std::fill(depth.begin(), depth.end(), 2.0f);
+  EXPECT_EQ(ErrorOf([&] { light::ViewOfGeometryBuffer(g, payload, info); }),
+            "light::ViewOfGeometryBuffer: missing normals (all zero)");
+}
+
+}  // namespace

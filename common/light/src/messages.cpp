@@ -1,0 +1,120 @@
+#include "probeless/light/messages.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace probeless::light {
+
+Intrinsics IntrinsicsFrom(const msgs::CameraInfo& info, int width, int height) {
+  if (!std::isfinite(info.fx) || !std::isfinite(info.fy) || !std::isfinite(info.cx) ||
+      !std::isfinite(info.cy)) {
+    throw LightError("light::IntrinsicsFrom: camera info has non-finite intrinsics");
+  }
+  if (!(info.fx > 0) || !(info.fy > 0)) {
+    throw LightError("light::IntrinsicsFrom: camera info fx and fy must be > 0");
+  }
+  if (static_cast<int>(info.width) != width || static_cast<int>(info.height) != height) {
+    throw LightError("light::IntrinsicsFrom: camera info is " + std::to_string(info.width) + "x" +
+                     std::to_string(info.height) + ", buffer is " + std::to_string(width) + "x" +
+                     std::to_string(height));
+  }
+  return {info.fx, info.fy, info.cx, info.cy};
+}
+
+GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                                  const msgs::CameraInfo& info) {
+  GeometryView view;
+  view.width = static_cast<int>(g.width);
+  view.height = static_cast<int>(g.height);
+  view.intrinsics = IntrinsicsFrom(info, view.width, view.height);
+  view.depth = msgs::DepthPlane(g, payload);
+  view.normals = msgs::NormalsPlane(g, payload);
+  view.colour = msgs::ColourPlane(g, payload);
+  ValidateGeometryView(view, "ViewOfGeometryBuffer");
+  bool any_depth = false;
+  for (size_t p = 0; p < view.depth.size(); ++p) {
+    if (!(view.depth[p] > 0)) continue;
+    any_depth = true;
+    if (view.normals[3 * p] != 0 || view.normals[3 * p + 1] != 0 || view.normals[3 * p + 2] != 0) {
+      return view;
+    }
+  }
+  if (any_depth) throw LightError("light::ViewOfGeometryBuffer: missing normals (all zero)");
+  return view;
+}
+
+void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                            const msgs::CameraInfo& info, std::vector<float>* depth_m,
+                            std::vector<float>* normals) {
+  const int w = static_cast<int>(depth.width), h = static_cast<int>(depth.height);
+  const Intrinsics k = IntrinsicsFrom(info, w, h);
+  depth_m->resize(static_cast<size_t>(w) * h);
+  if (depth.encoding == msgs::Encoding::kDepth16) {
+    const double scale = info.depth_scale > 0 ? info.depth_scale : 0.001;
+    for (int y = 0; y < h; ++y) {
+      const auto row = msgs::ImageRow<uint16_t>(depth, payload, y);
+      for (int x = 0; x < w; ++x) (*depth_m)[y * w + x] = static_cast<float>(row[x] * scale);
+    }
+  } else if (depth.encoding == msgs::Encoding::kFloat32) {
+    for (int y = 0; y < h; ++y) {
+      const auto row = msgs::ImageRow<float>(depth, payload, y);
+      for (int x = 0; x < w; ++x) {
+        (*depth_m)[y * w + x] = std::isfinite(row[x]) && row[x] > 0 ? row[x] : 0.0f;
+      }
+    }
+  } else {
+    throw LightError("light::GeometryFromDepthImage: depth encoding " +
+                     std::string(msgs::EncodingName(depth.encoding)) +
+                     " is not depth16 or float32");
+  }
+  // Raw sensor depth is quantised: smooth it (edge-aware) before the normals.
+  SmoothDepth(*depth_m, w, h, std::max(1, w / 80));
+  NormalsFromDepth(*depth_m, w, h, k, normals, 0.05f, std::max(2, w / 160));
+}
+
+void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,
+                   int height, std::vector<float>* grey) {
+  if (static_cast<int>(image.width) != width || static_cast<int>(image.height) != height) {
+    throw LightError("light::GreyFromImage: image is " + std::to_string(image.width) + "x" +
+                     std::to_string(image.height) + ", geometry is " + std::to_string(width) + "x" +
+                     std::to_string(height));
+  }
+  grey->resize(static_cast<size_t>(width) * height);
+  for (int y = 0; y < height; ++y) {
+    const auto row = msgs::ImageRow<uint8_t>(image, payload, y);
+    float* dst = grey->data() + static_cast<size_t>(y) * width;
+    switch (image.encoding) {
+      case msgs::Encoding::kRgb8:
+      case msgs::Encoding::kBgr8:
+        for (int x = 0; x < width; ++x) {
+          dst[x] = (SrgbToLinear(row[3 * x]) + SrgbToLinear(row[3 * x + 1]) +
+                    SrgbToLinear(row[3 * x + 2])) *
+                   (1.0f / 3);
+        }
+        break;
+      case msgs::Encoding::kMono8:
+        for (int x = 0; x < width; ++x) dst[x] = SrgbToLinear(row[x]);
+        break;
+      default:
+        throw LightError("light::GreyFromImage: encoding " +
+                         std::string(msgs::EncodingName(image.encoding)) +
+                         " is not rgb8, bgr8 or mono8");
+    }
+  }
+}
+
+void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale) {
+  out->bands = static_cast<uint32_t>(std::min(e.bands, static_cast<int>(msgs::kMaxShBands)));
+  for (uint32_t n = 0; n < msgs::kMaxShCoefficients; ++n) {
+    const float v = n < out->CoefficientCount() && n < e.coefficients.size()
+                        ? static_cast<float>(e.coefficients[n]) * scale
+                        : 0.0f;
+    for (int c = 0; c < 3; ++c) out->coefficients[n][c] = v;
+  }
+  for (int k = 0; k < 3; ++k) out->dominant_direction[k] = e.dominant_direction[k];
+  out->intensity = e.intensity * scale;
+  out->confidence = std::clamp(e.confidence, 0.0f, 1.0f);
+}
+
+}  // namespace probeless::light

@@ -1,0 +1,99 @@
+#include "probeless/light/sim_buffers.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace probeless::light {
+
+GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_effects) {
+  GeometryStorage g;
+  const auto& r = frame.render;
+  g.width = r.width;
+  g.height = r.height;
+  g.intrinsics = {frame.camera.fx, frame.camera.fy, frame.camera.cx, frame.camera.cy};
+  const size_t pixels = static_cast<size_t>(r.width) * r.height;
+  if (!sensor_effects) {
+    g.depth = r.depth_m;
+    g.normals = r.normals;
+    g.colour = r.srgb;
+    g.grey.resize(pixels);
+    for (size_t i = 0; i < pixels; ++i) {
+      float s = 0;
+      for (int c = 0; c < 3; ++c) s += std::clamp(r.linear_rgb[3 * i + c], 0.0f, 1.0f);
+      g.grey[i] = s / 3;
+    }
+  } else {
+    g.depth.resize(pixels);
+    for (size_t i = 0; i < pixels; ++i) g.depth[i] = frame.depth_mm[i] * 0.001f;
+    SmoothDepth(g.depth, g.width, g.height, std::max(1, g.width / 80));
+    NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
+                     std::max(2, g.width / 160));
+    g.colour = frame.rgb;
+    SrgbToLinearGrey(g.colour, &g.grey);
+  }
+  return g;
+}
+
+AuxiliaryStorage RenderAuxiliaryViews(const raytrace::Scene& scene, const raytrace::Camera& camera,
+                                      const AuxiliaryViewOptions& options,
+                                      raytrace::ThreadPool* pool) {
+  using raytrace::Vec3;
+  AuxiliaryStorage out;
+  const raytrace::Transform& c2w = camera.camera_to_world;
+  const Vec3 cam_pos{static_cast<float>(c2w.translation[0]), static_cast<float>(c2w.translation[1]),
+                     static_cast<float>(c2w.translation[2])};
+  const Vec3 forward = c2w.ApplyDirection({0, 0, 1});
+  const Vec3 centre = cam_pos + forward * options.centre_distance_m;
+  struct Spec {
+    AuxiliaryRole role;
+    Vec3 dir;  // world viewing direction
+  };
+  std::vector<Spec> specs;
+  if (options.left_right_top) {
+    specs.push_back({AuxiliaryRole::kLeft, c2w.ApplyDirection({1, 0, 0})});
+    specs.push_back({AuxiliaryRole::kRight, c2w.ApplyDirection({-1, 0, 0})});
+    specs.push_back({AuxiliaryRole::kTop, {0, -1, 0}});
+  }
+  if (options.light_view) {
+    const auto& l = options.light_direction;
+    specs.push_back({AuxiliaryRole::kLight, -c2w.ApplyDirection({l[0], l[1], l[2]})});
+  }
+  const raytrace::Transform w2c = c2w.Inverse();
+  const int n = options.resolution;
+  const float pixel = options.extent_m / n;
+  out.depth.resize(specs.size());
+  for (size_t s = 0; s < specs.size(); ++s) {
+    const Vec3 z = raytrace::Normalize(specs[s].dir);
+    const Vec3 helper = std::abs(z.y) > 0.9f ? Vec3{0, 0, 1} : Vec3{0, -1, 0};
+    const Vec3 x = raytrace::Normalize(raytrace::Cross(helper, z));
+    const Vec3 y = raytrace::Cross(z, x);
+    const Vec3 origin = centre - z * options.standoff_m;
+    std::vector<raytrace::Ray> rays(static_cast<size_t>(n) * n);
+    const float h = 0.5f * (n - 1);
+    for (int v = 0; v < n; ++v) {
+      for (int u = 0; u < n; ++u) {
+        rays[v * n + u].origin = origin + x * ((u - h) * pixel) + y * ((v - h) * pixel);
+        rays[v * n + u].direction = z;
+      }
+    }
+    std::vector<raytrace::Hit> hits(rays.size());
+    scene.Intersect(rays, hits, pool);
+    auto& depth = out.depth[s];
+    depth.resize(rays.size());
+    for (size_t i = 0; i < rays.size(); ++i) depth[i] = hits[i].object >= 0 ? hits[i].t : 0.0f;
+    // view -> camera = world -> camera * view -> world.
+    const Vec3 cx = w2c.ApplyDirection(x), cy = w2c.ApplyDirection(y), cz = w2c.ApplyDirection(z);
+    const Vec3 t = w2c.Apply(origin);
+    OrthographicView view;
+    view.role = specs[s].role;
+    view.width = view.height = n;
+    view.pixel_size_m = pixel;
+    view.rotation = {cx.x, cy.x, cz.x, cx.y, cy.y, cz.y, cx.z, cy.z, cz.z};
+    view.translation = {t.x, t.y, t.z};
+    view.depth = depth;
+    out.buffers.views.push_back(view);
+  }
+  return out;
+}
+
+}  // namespace probeless::light

@@ -1,0 +1,158 @@
+// scene_light: per-pixel SH radiance transfer by screen-space directional occlusion and the scene
+// light estimated from it (Gruber et al. 2015 §5; probeless_light, docs/light.md).
+//
+// Inputs (relative names, remap them in launch files):
+//   mode gbuffer (default): `scene/gbuffer` (msgs::GeometryBuffer, G_r from fusion) triggers a
+//       frame; depth and normals come from it.
+//   mode depth: `camera/depth` (msgs::Image depth16 or float32) triggers a frame; the depth is
+//       smoothed and normals are computed from it (no reconstruction needed).
+//   Both: `camera/camera_info` (msgs::CameraInfo, latest) and `camera/image` (msgs::Image rgb8 /
+//       bgr8 / mono8, latest; I_c of the estimation; a debug line if its sequence differs).
+// Outputs: `scene/light` (msgs::ShLight, white light in the camera frame, bands = param bands,
+//   dominant direction, intensity, confidence; header of the triggering message) and, with
+//   publish_transfer, `scene/transfer` (msgs::TransferBuffer, the per-pixel T for differential
+//   rendering). A frame without camera info or image yet is skipped (one warning).
+// Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
+//   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
+//   direction_bands (2), publish_transfer (true).
+// Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
+// otherwise.
+#include "probeless/node/main.h"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "probeless/light/estimate.h"
+#include "probeless/light/messages.h"
+#include "probeless/light/transfer.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+
+namespace {
+
+using namespace probeless;
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "scene_light");
+  const std::string mode = node.Param("mode", "gbuffer");
+  if (mode != "gbuffer" && mode != "depth") {
+    throw node::UsageError("scene_light: mode must be gbuffer or depth, got '" + mode + "'");
+  }
+  light::TransferOptions to;
+  to.bands = node.Param("bands", 4);
+  to.directions = node.Param("directions", 32);
+  to.subsample = node.Param("subsample", 1);
+  to.radius_m = static_cast<float>(node.Param("radius", 0.3));
+  to.max_occluder_distance_m = 2 * to.radius_m;
+  to.seed = static_cast<uint64_t>(node.Param<int64_t>("seed", 1));
+  to.threads = node.Param("threads", 2);
+  light::EstimateOptions eo;
+  eo.albedo = static_cast<float>(node.Param("albedo", 0.6));
+  eo.stride = node.Param("stride", 4);
+  eo.robust = node.Param("robust", true);
+  eo.non_negative = node.Param("non_negative", false);
+  eo.direction_bands = node.Param("direction_bands", 2);
+  const bool publish_transfer = node.Param("publish_transfer", true);
+  light::TransferComputer computer(to);  // throws LightError for bad options
+
+  bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
+  bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
+  bus::Subscriber trigger_sub = mode == "gbuffer"
+                                    ? node.CreateSubscriber<msgs::GeometryBuffer>("scene/gbuffer")
+                                    : node.CreateSubscriber<msgs::Image>("camera/depth");
+  bus::Publisher light_pub = node.CreatePublisher<msgs::ShLight>("scene/light");
+  std::optional<bus::Publisher> transfer_pub;
+  size_t transfer_capacity = 0;
+
+  std::optional<msgs::CameraInfo> info;
+  std::optional<bus::Sample> image;  // the latest image sample (held)
+  std::vector<float> grey, depth, normals;
+  light::TransferResult result;
+  int64_t frames = 0, published = 0;
+  bool warned = false;
+
+  auto process = [&](bus::Sample&& sample) {
+    msgs::Header header;
+    light::GeometryView view;
+    if (mode == "gbuffer") {
+      const auto g = msgs::ReadMessage<msgs::GeometryBuffer>(sample.data());
+      if (!info || !image) {
+        if (!warned) node.Warn() << "skipping frames until camera_info and image arrive";
+        warned = true;
+        return;
+      }
+      header = g->header;
+      view = light::ViewOfGeometryBuffer(*g, g.payload, *info);
+    } else {
+      const auto d = msgs::ReadMessage<msgs::Image>(sample.data());
+      if (!info || !image) {
+        if (!warned) node.Warn() << "skipping frames until camera_info and image arrive";
+        warned = true;
+        return;
+      }
+      header = d->header;
+      light::GeometryFromDepthImage(*d, d.payload, *info, &depth, &normals);
+      view = {static_cast<int>(d->width),
+              static_cast<int>(d->height),
+              light::IntrinsicsFrom(*info, d->width, d->height),
+              depth,
+              normals,
+              {}};
+    }
+    const auto img = msgs::ReadMessage<msgs::Image>(image->data());
+    if (img->header.sequence != header.sequence) {
+      node.Debug() << "image sequence " << img->header.sequence << " used for frame "
+                   << header.sequence;
+    }
+    light::GreyFromImage(*img, img.payload, view.width, view.height, &grey);
+    computer.Compute(view, {}, nullptr, &result);
+    const light::LightEstimate e = light::EstimateLight(result, grey, eo);
+    ++frames;
+    if (e.valid) {
+      bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));
+      auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
+      out->header = header;
+      light::FillShLight(e, out.message);
+      light_pub.Publish(std::move(loan));
+      ++published;
+    }
+    if (publish_transfer) {
+      const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
+      const size_t bytes = msgs::TransferBuffer::MessageBytesFor(w, h, cc);
+      if (!transfer_pub || bytes > transfer_capacity) {
+        transfer_pub.reset();
+        transfer_pub.emplace(node.CreatePublisher<msgs::TransferBuffer>(
+            "scene/transfer", {.max_message_bytes = bytes}));
+        transfer_capacity = bytes;
+      }
+      bus::Loan loan = transfer_pub->Borrow(bytes);
+      auto out = msgs::WriteMessage<msgs::TransferBuffer>(loan.data());
+      out->header = header;
+      out->Init(w, h, cc);
+      const auto dst = msgs::TransferCoefficients(*out.message, out.payload);
+      std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
+      transfer_pub->Publish(std::move(loan));
+    }
+  };
+
+  std::vector<node::Handler> handlers{
+      {&info_sub,
+       [&](bus::Sample&& s) {
+         const auto m = msgs::ReadMessage<msgs::CameraInfo>(s.data());
+         m->Validate();
+         info = *m;
+       }},
+      {&image_sub, [&](bus::Sample&& s) { image.emplace(std::move(s)); }},
+      {&trigger_sub, process}};
+  node.Spin(handlers);
+  node.Info() << "published " << published << " lights for " << frames << " frames";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::RunMain<light::LightError, msgs::MessageError>("scene_light",
+                                                              [&] { return Run(argc, argv); });
+}
