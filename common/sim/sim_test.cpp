@@ -1,6 +1,9 @@
 // Scenario parsing (and its error messages), simulator determinism and the "sim" Source.
 #include <gtest/gtest.h>
 
+#include <array>
+#include <cmath>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -136,15 +139,18 @@ TEST(SimSource, FaceOrbitStream) {
   std::unique_ptr<dataset::Source> source = OpenSimSource(face, options);
   EXPECT_EQ(source->kind(), "sim");
   const auto& topics = source->topics();
-  ASSERT_EQ(topics.size(), 6u);
+  ASSERT_EQ(topics.size(), 7u);
   EXPECT_EQ(topics[0].topic, "/camera/camera_info");
   EXPECT_EQ(topics[1].topic, "/camera/image");
   EXPECT_EQ(topics[2].topic, "/camera/depth");
   EXPECT_EQ(topics[3].topic, "/groundtruth/pose");
   EXPECT_EQ(topics[4].topic, "/groundtruth/light");
   EXPECT_EQ(topics[5].topic, "/groundtruth/face");
-  EXPECT_EQ(source->message_count(), 18u);
-  std::vector<int> count(6, 0);
+  EXPECT_EQ(topics[6].topic, "/groundtruth/face_light");
+  EXPECT_EQ(source->message_count(), 21u);
+  std::vector<int> count(7, 0);
+  std::vector<std::array<float, 3>> at_camera;
+  std::vector<std::array<float, 3>> at_face;
   uint64_t last_time = 0;
   while (auto m = source->Next()) {
     ++count[m->topic_index];
@@ -175,9 +181,13 @@ TEST(SimSource, FaceOrbitStream) {
         EXPECT_NEAR(pose->transform.translation.y, 1.62, 0.03);
         break;
       }
-      case 4: {
+      case 4:
+      case 6: {
         const auto light = msgs::ReadMessage<msgs::ShLight>(bytes);
         light->Validate();
+        auto& series = m->topic_index == 4 ? at_camera : at_face;
+        series.push_back({light->dominant_direction[0], light->dominant_direction[1],
+                          light->dominant_direction[2]});
         EXPECT_EQ(light->bands, 3u);
         EXPECT_GT(light->coefficients[0][0], 0);
         EXPECT_GT(light->intensity, 0);
@@ -207,7 +217,13 @@ TEST(SimSource, FaceOrbitStream) {
       }
     }
   }
-  EXPECT_EQ(count, std::vector<int>({3, 3, 3, 3, 3, 3}));
+  EXPECT_EQ(count, std::vector<int>({3, 3, 3, 3, 3, 3, 3}));
+  // The orbiting light is near the head: seen from the face it is far from where it is seen from
+  // the camera (the first frame: ~70 deg up from the camera, ~27 deg up from the face).
+  ASSERT_EQ(at_face.size(), 3u);
+  const auto& c = at_camera[0];
+  const auto& f = at_face[0];
+  EXPECT_LT(c[0] * f[0] + c[1] * f[1] + c[2] * f[2], std::cos(30.0 * M_PI / 180.0));
   EXPECT_EQ(progress, 3u);
   source->Rewind();
   EXPECT_TRUE(source->Next().has_value());

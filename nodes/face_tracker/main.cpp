@@ -10,7 +10,8 @@
 // haar_cascade_path, redetect_period, detect_max_width, pose_smoothing, sample_model (default
 // data/face_light/default_model.txt: absolute, else relative to the working directory, the source
 // tree, then <prefix>/share/probeless), saturation_level, dark_level, min_facing_cosine,
-// neighbour_threshold, four_point_frame, publish_debug_image.
+// neighbour_threshold, four_point_frame, publish_debug_image, image_transfer (linear: sample
+// values as they are, like the Yale B training images | srgb: decode sRGB images (webcams, sim)).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or models (one line on stderr), 1 otherwise.
 #include "probeless/node/main.h"
 
@@ -61,6 +62,12 @@ int Run(int argc, char** argv) {
       node.Param("neighbour_threshold", sampler_options.neighbour_threshold);
   sampler_options.four_point_frame =
       node.Param("four_point_frame", sampler_options.four_point_frame);
+  const std::string image_transfer = node.Param("image_transfer", "linear");
+  if (image_transfer != "linear" && image_transfer != "srgb") {
+    throw node::UsageError("face_tracker: image_transfer must be linear or srgb, got '" +
+                           image_transfer + "'");
+  }
+  sampler_options.srgb_input = image_transfer == "srgb";
   const bool debug_image = node.Param("publish_debug_image", false);
   const std::string model_path =
       ResolveModel(node.Param("sample_model", "data/face_light/default_model.txt"));

@@ -146,6 +146,13 @@ FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) 
     } else {
       std::copy_n(&values[3 * i], 3, rgb);
     }
+    if (options_.srgb_input) {
+      // Decoding the patch mean, not each pixel: a slight underestimate on textured patches.
+      for (int c = 0; c < 3; ++c) {
+        rgb[c] = rgb[c] <= 0.04045f ? rgb[c] / 12.92f
+                                    : std::pow((rgb[c] + 0.055f) / 1.055f, 2.4f);
+      }
+    }
     mean[i] = (rgb[0] + rgb[1] + rgb[2]) / 3;
     const fl::Point2 c = out.crop_to_image.Apply(fl::CropPixelFromNormalised(positions_[i]));
     out.image_points[2 * i] = static_cast<float>(c.x);

@@ -315,10 +315,17 @@ SimFrame Simulator::Render(uint64_t index) {
     }
   });
 
-  // Ground truth: light at the camera in the camera frame, and the face.
+  // Ground truth: light at the camera in the camera frame, and the face (with the light at the
+  // face origin, camera frame: what the face pipeline estimates; a near point light seen from the
+  // camera and from the face can differ by tens of degrees).
   const Transform& pose = f.camera.camera_to_world;
   const Vec3 eye = ToVec3(pose.translation);
   f.light = raytrace::LightingAt(*scene_, eye, pose.rotation);
+  if (face_object_ >= 0) {
+    f.face_light = raytrace::LightingAt(
+        *scene_, scene_->ObjectTransform(object_index_[face_object_]).Apply({0, 0, 0}),
+        pose.rotation);
+  }
   if (face_object_ >= 0) {
     const int object = object_index_[face_object_];
     const Transform head = pose.Inverse() * scene_->ObjectTransform(object);
@@ -419,6 +426,8 @@ class SimSource final : public dataset::Source {
     if (has_face_) {
       face_ = add(gt + "/face", msgs::FaceObservation::kTypeName,
                   msgs::FaceObservation::kLayoutHash, sizeof(msgs::FaceObservation), face_count);
+      face_light_ = add(gt + "/face_light", msgs::ShLight::kTypeName, msgs::ShLight::kLayoutHash,
+                        sizeof(msgs::ShLight), light_count);
     }
   }
 
@@ -500,15 +509,21 @@ class SimSource final : public dataset::Source {
       SetTransform(pose->transform, f.camera.camera_to_world);
     }
     if (EmitsAt(f.index, s.light_rate_hz, s.fps)) {
-      auto light = Start<msgs::ShLight>(light_, t, sizeof(msgs::ShLight));
-      FillHeader(light->header, t, seq, cam);
-      light->bands = 3;
-      for (int i = 0; i < 9; ++i) {
-        for (int ch = 0; ch < 3; ++ch) light->coefficients[i][ch] = f.light.sh[i][ch];
-      }
-      for (int k = 0; k < 3; ++k) light->dominant_direction[k] = f.light.dominant_direction[k];
-      light->intensity = f.light.dominant_irradiance;
-      light->confidence = 1;
+      // /groundtruth/light: at the camera; /groundtruth/face_light: at the face origin (what a
+      // face-based estimate sees). Both in the camera frame.
+      auto emit = [&](size_t topic, const raytrace::LightingGroundTruth& truth) {
+        auto light = Start<msgs::ShLight>(topic, t, sizeof(msgs::ShLight));
+        FillHeader(light->header, t, seq, cam);
+        light->bands = 3;
+        for (int i = 0; i < 9; ++i) {
+          for (int ch = 0; ch < 3; ++ch) light->coefficients[i][ch] = truth.sh[i][ch];
+        }
+        for (int k = 0; k < 3; ++k) light->dominant_direction[k] = truth.dominant_direction[k];
+        light->intensity = truth.dominant_irradiance;
+        light->confidence = 1;
+      };
+      emit(light_, f.light);
+      if (has_face_) emit(face_light_, f.face_light);
     }
     if (has_face_ && EmitsAt(f.index, s.face_rate_hz, s.fps)) {
       auto face = Start<msgs::FaceObservation>(face_, t, sizeof(msgs::FaceObservation));
@@ -547,7 +562,7 @@ class SimSource final : public dataset::Source {
   Simulator simulator_;
   uint64_t frames_ = 0;
   std::vector<dataset::TopicInfo> topics_;
-  size_t info_ = 0, image_ = 0, depth_ = 0, pose_ = 0, light_ = 0, face_ = 0;
+  size_t info_ = 0, image_ = 0, depth_ = 0, pose_ = 0, light_ = 0, face_ = 0, face_light_ = 0;
   bool has_face_ = false;
   uint64_t next_ = 0;
   std::deque<dataset::StreamMessage> pending_;

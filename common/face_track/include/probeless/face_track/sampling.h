@@ -39,12 +39,18 @@ struct SamplerOptions {
   // Landmarks fitted to the canonical crop: false = the paper's eye-based frame (two eye
   // centres), true = eyes, nose tip and mouth centre (least squares over 4 points).
   bool four_point_frame = true;
+  // The image is sRGB-encoded (webcams, the simulator's renders): each patch mean is decoded to
+  // linear (IEC 61966-2-1) before it is stored, so the estimator gets the (roughly linear) units of
+  // the Yale B pixels the shipped model was trained on. false = the values as they are (Yale B).
+  // dark_level and neighbour_threshold then apply to the linear values.
+  bool srgb_input = false;
 };
 
 // The samples of one frame, in model order.
 struct FaceSamples {
   int count = 0;
-  std::vector<float> rgb;           // [3 i + c], patch mean / 255 of R, G, B (gray: R = G = B)
+  std::vector<float> rgb;  // [3 i + c], patch mean / 255 of R, G, B (gray: R = G = B), sRGB-decoded
+                           // with SamplerOptions::srgb_input
   std::vector<uint8_t> flags;       // SampleFlag bits, 0 = valid
   std::vector<float> normals;       // [3 i + k], unit normal in the camera frame
   std::vector<float> image_points;  // [2 i + k], patch centre x, y in image pixels

@@ -39,8 +39,12 @@ struct SimFrame {
   raytrace::Frame render;          // the noiseless render
   std::vector<uint8_t> rgb;        // rgb8 (sRGB) after exposure and colour noise
   std::vector<uint16_t> depth_mm;  // depth16 after range, quantisation, noise, holes
-  // Lighting at the camera position in the camera frame (see raytrace::LightingAt).
+  // Lighting at the camera position in the camera frame (see raytrace::LightingAt); published as
+  // /groundtruth/light.
   raytrace::LightingGroundTruth light;
+  // Lighting at the face origin in the camera frame (scenarios with a face object, else zero): the
+  // reference for the face pipeline (not published; docs/sim.md).
+  raytrace::LightingGroundTruth face_light;
   FaceTruth face;
 };
 
