@@ -27,6 +27,7 @@
 #include "probeless/dataset/datasets.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/testing/testing.h"
 
 namespace {
 
@@ -39,19 +40,8 @@ const std::string kLaunch = PROBELESS_SOURCE_DIR "/launch/capture";
 const std::string kOpenNi2Dir = PROBELESS_TEST_BIN_DIR "/openni2";
 const std::string kSevenScenes = PROBELESS_DATA_DIR "/7scenes-redkitchen";
 
-struct Result {
-  int code = -1;
-  std::string out;
-  std::string err;
-  double seconds = 0;
-};
-
-std::string Slurp(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using Result = probeless::testing::CommandResult;
+using probeless::testing::ReadText;
 
 class CaptureIntegrationTest : public ::testing::Test {
  protected:
@@ -62,19 +52,8 @@ class CaptureIntegrationTest : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
 
-  Result Run(const std::string& command) {
-    const fs::path out = dir_ / "stdout.txt";
-    const fs::path err = dir_ / "stderr.txt";
-    const auto start = std::chrono::steady_clock::now();
-    const int status =
-        std::system((command + " < /dev/null > " + out.string() + " 2> " + err.string()).c_str());
-    Result r;
-    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = Slurp(out);
-    r.err = Slurp(err);
-    return r;
-  }
+  // Runs a shell command line (no stdin), capturing stdout, stderr and the time it took.
+  Result Run(const std::string& command) { return probeless::testing::RunCommand(command, dir_); }
 
   fs::path dir_;
 };
@@ -172,14 +151,14 @@ TEST_F(CaptureIntegrationTest, FreenectOnFakenectDumpOf7ScenesFromLaunchFile) {
     EXPECT_EQ(im->header.FrameId(), "kinect_rgb_optical");
     EXPECT_EQ(im->header.sequence, i + 1);
     EXPECT_GT(im->header.stamp_ns, 1'600'000'000'000'000'000);
-    const std::string ppm = Slurp(dump / colour_files[i]);
+    const std::string ppm = ReadText(dump / colour_files[i]);
     const std::string pixels = ppm.substr(ppm.find('\n') + 1);
     ASSERT_EQ(pixels.size(), 640u * 480 * 3);
     EXPECT_EQ(std::memcmp(pixels.data(), im.payload.data(), pixels.size()), 0) << "frame " << i;
 
     msgs::ReadView<msgs::Image> d = msgs::ReadMessage<msgs::Image>(depths[i].bytes());
     ASSERT_EQ(d->encoding, msgs::Encoding::kDepth16);
-    const std::string pgm = Slurp(dump / depth_files[i]);
+    const std::string pgm = ReadText(dump / depth_files[i]);
     const auto* raw = reinterpret_cast<const uint16_t*>(pgm.data() + pgm.find('\n') + 1);
     const auto* mm = reinterpret_cast<const uint16_t*>(d.payload.data());
     for (size_t p = 0; p < 640 * 480; ++p) {
@@ -352,7 +331,7 @@ TEST_F(CaptureIntegrationTest, RetryWaitsForTheDeviceAndStopsPromptly) {
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
   EXPECT_LT(std::chrono::steady_clock::now() - start, 1s);
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
-  const std::string err = Slurp(dir_ / "retry.err");
+  const std::string err = ReadText(dir_ / "retry.err");
   EXPECT_EQ(
       err,
       "[warn] [/capture_v4l2] V4L2 device '/dev/video_probeless_missing' does not exist: plug "

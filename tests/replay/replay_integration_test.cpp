@@ -19,6 +19,7 @@
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/testing/testing.h"
 
 namespace {
 
@@ -31,18 +32,8 @@ const std::string kBin = PROBELESS_BIN_DIR;
 const std::string kProbe = PROBELESS_TEST_BIN_DIR "/replay_probe";
 const std::string kLaunchFile = PROBELESS_SOURCE_DIR "/tests/replay/lockstep.launch.yaml";
 
-struct Result {
-  int code = -1;
-  std::string out;
-  std::string err;
-};
-
-std::string Slurp(const fs::path& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using Result = probeless::testing::CommandResult;
+using probeless::testing::ReadText;
 
 class ReplayIntegrationTest : public ::testing::Test {
  protected:
@@ -54,17 +45,7 @@ class ReplayIntegrationTest : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
 
   // Runs a shell command line (no stdin), capturing stdout and stderr.
-  Result Run(const std::string& command) {
-    const fs::path out = dir_ / "stdout.txt";
-    const fs::path err = dir_ / "stderr.txt";
-    const int status =
-        std::system((command + " < /dev/null > " + out.string() + " 2> " + err.string()).c_str());
-    Result r;
-    r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = Slurp(out);
-    r.err = Slurp(err);
-    return r;
-  }
+  Result Run(const std::string& command) { return probeless::testing::RunCommand(command, dir_); }
 
   // A folder of `count` 16x8 8-bit PGM images; image i is filled with the value 10 * i.
   fs::path WriteImageFolder(int count) {
@@ -166,7 +147,7 @@ TEST_F(ReplayIntegrationTest, ConvertInfoAndPlayAFolder) {
   // A log whose writer died: cut it in the middle of the data.
   const fs::path cut = dir_ / "cut.mcap";
   {
-    const std::string bytes = Slurp(log);
+    const std::string bytes = ReadText(log);
     std::ofstream(cut, std::ios::binary) << bytes.substr(0, bytes.size() / 2);
   }
   r = Run(kBin + "/probeless bag info " + cut.string());
@@ -255,7 +236,7 @@ std::vector<std::string> RunLockstep(ReplayIntegrationTest* test, const fs::path
   const fs::path out = dir / (name + ".log");
   const int status = std::system((cmd + " < /dev/null > " + out.string() + " 2>&1").c_str());
   result->code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  result->out = Slurp(out);
+  result->out = ReadText(out);
   std::vector<std::string> lines;
   std::ifstream in(output);
   for (std::string line; std::getline(in, line);) lines.push_back(line);
