@@ -1,4 +1,4 @@
-// launch/scene_light_sim.yaml with 3 frames of tools/scene_light_eval/courtyard_sun.yaml: the sim
+// launch/scene_light_sim.yaml with 3 frames of data/scenarios/courtyard_sun.yaml: the sim
 // in lock-step with scene_light (depth mode, normals from the sensor depth); one /scene/light and
 // one /scene/transfer per frame, paired with /groundtruth/light by header.sequence, plausible
 // (valid bands, unit direction, confidence in [0, 1], transfer 640x480x16); plus the node's
@@ -58,7 +58,7 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
   const std::string command =
       std::string(PROBELESS_BIN_DIR) + "/probeless launch " + PROBELESS_SOURCE_DIR +
       "/launch/scene_light_sim.yaml frames:=3 " + "scenario:=" + PROBELESS_SOURCE_DIR +
-      "/tools/scene_light_eval/courtyard_sun.yaml < /dev/null > /dev/null 2> " + err;
+      "/data/scenarios/courtyard_sun.yaml < /dev/null > /dev/null 2> " + err;
   const int status = std::system(command.c_str());
   std::this_thread::sleep_for(300ms);
   stop = true;
