@@ -5,6 +5,7 @@
 #include <numbers>
 #include <string>
 
+#include "probeless/linalg/cholesky.h"
 #include "probeless/sh/sh.h"
 
 namespace probeless::light {
@@ -13,28 +14,8 @@ namespace {
 // Solves the symmetric positive definite system A x = b (n x n, row-major) by Cholesky; returns
 // false if A is not positive definite.
 bool CholeskySolve(std::vector<double> a, std::vector<double> b, int n, std::vector<double>* x) {
-  for (int j = 0; j < n; ++j) {
-    double d = a[j * n + j];
-    for (int k = 0; k < j; ++k) d -= a[j * n + k] * a[j * n + k];
-    if (!(d > 0)) return false;
-    d = std::sqrt(d);
-    a[j * n + j] = d;
-    for (int i = j + 1; i < n; ++i) {
-      double s = a[i * n + j];
-      for (int k = 0; k < j; ++k) s -= a[i * n + k] * a[j * n + k];
-      a[i * n + j] = s / d;
-    }
-  }
-  for (int i = 0; i < n; ++i) {
-    double s = b[i];
-    for (int k = 0; k < i; ++k) s -= a[i * n + k] * b[k];
-    b[i] = s / a[i * n + i];
-  }
-  for (int i = n - 1; i >= 0; --i) {
-    double s = b[i];
-    for (int k = i + 1; k < n; ++k) s -= a[k * n + i] * b[k];
-    b[i] = s / a[i * n + i];
-  }
+  if (!linalg::CholeskyFactor(a.data(), n)) return false;
+  linalg::CholeskySolveFactored(a.data(), n, b.data());
   *x = std::move(b);
   return true;
 }
