@@ -447,32 +447,34 @@ TEST(PlayerTest, LockStepCoversNodesDownstreamOfThePlayedTopics) {
   fs::remove(result);
   const pid_t relay = fork();
   if (relay == 0) {
-    node::Node node(std::vector<std::string>{"relay"}, "relay");
-    bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/cam/image", {.queue_depth = 1});
-    bus::Publisher out = node.CreatePublisher<msgs::Image>(
-        "/mid/image",
-        {.max_message_bytes = msgs::Image::MessageBytesFor(8, 4, msgs::Encoding::kMono8)});
-    node.Spin({{&in, [&](bus::Sample&& s) {
-                  std::this_thread::sleep_for(2ms);
-                  out.PublishCopy(s.data());
-                }}});
+    {  // the bus objects leave the bus (and /dev/shm) before _exit
+      node::Node node(std::vector<std::string>{"relay"}, "relay");
+      bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/cam/image", {.queue_depth = 1});
+      bus::Publisher out = node.CreatePublisher<msgs::Image>(
+          "/mid/image",
+          {.max_message_bytes = msgs::Image::MessageBytesFor(8, 4, msgs::Encoding::kMono8)});
+      node.Spin({{&in, [&](bus::Sample&& s) {
+                    std::this_thread::sleep_for(2ms);
+                    out.PublishCopy(s.data());
+                  }}});
+    }
     _exit(0);
   }
   const pid_t sink = fork();
   if (sink == 0) {
-    node::Node node(std::vector<std::string>{"sink"}, "sink");
-    bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/mid/image", {.queue_depth = 1});
-    std::vector<int> seen;
-    node.Spin({{&in, [&](bus::Sample&& s) {
-                  seen.push_back(
-                      static_cast<int>(msgs::ReadMessage<msgs::Image>(s.data()).payload[0]));
-                  std::this_thread::sleep_for(3ms);
-                  if (static_cast<int>(seen.size()) >= kFrames) node::RequestShutdown();
-                }}});
-    {
+    {  // the bus objects leave the bus (and /dev/shm) and the file is flushed before _exit
+      node::Node node(std::vector<std::string>{"sink"}, "sink");
+      bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/mid/image", {.queue_depth = 1});
+      std::vector<int> seen;
+      node.Spin({{&in, [&](bus::Sample&& s) {
+                    seen.push_back(
+                        static_cast<int>(msgs::ReadMessage<msgs::Image>(s.data()).payload[0]));
+                    std::this_thread::sleep_for(3ms);
+                    if (static_cast<int>(seen.size()) >= kFrames) node::RequestShutdown();
+                  }}});
       std::ofstream out(result);
       for (int v : seen) out << v << "\n";
-    }  // flushed before _exit
+    }
     _exit(0);
   }
   VectorSource source(kFrames, 1'000'000);
