@@ -99,6 +99,27 @@ class MemorySource : public Source {
 };
 
 // A chunk or a Message record outside chunks: the unit the cursor loads.
+// The record at `position` of `records` (a summary or a decompressed chunk, called `region` in
+// errors): its opcode and body, bounds-checked. Fails (LogError) on a cut prefix or a length that
+// runs past the region.
+struct RecordAt {
+  uint8_t opcode;
+  std::span<const uint8_t> body;
+};
+RecordAt NextRecord(std::span<const uint8_t> records, size_t position, const Where& where,
+                    const char* cut_prefix_problem, const char* region) {
+  if (records.size() - position < kRecordPrefixSize) Fail(where, position, cut_prefix_problem);
+  const uint8_t opcode = records[position];
+  const uint64_t length = Load<uint64_t>(records.data() + position + 1);
+  const size_t left = records.size() - position - kRecordPrefixSize;
+  if (length > left) {
+    Fail(where, position,
+         OpcodeName(opcode) + " record length " + std::to_string(length) +
+             " runs past the end of the " + region + " (" + std::to_string(left) + " bytes left)");
+  }
+  return {opcode, records.subspan(position + kRecordPrefixSize, length)};
+}
+
 struct Block {
   uint64_t offset = 0;  // file offset of the record's opcode
   uint64_t length = 0;  // whole record
@@ -313,18 +334,9 @@ bool McapReader::Impl::TryIndexed(uint64_t footer_offset) {
   Statistics summary_statistics;
   size_t position = 0;
   while (position < records.size()) {
-    if (records.size() - position < kRecordPrefixSize) {
-      Fail(where, position, "summary ends inside a record prefix");
-    }
-    const uint8_t opcode = records[position];
-    const uint64_t length = Load<uint64_t>(records.data() + position + 1);
-    if (length > records.size() - position - kRecordPrefixSize) {
-      Fail(where, position,
-           OpcodeName(opcode) + " record length " + std::to_string(length) +
-               " runs past the end of the summary (" +
-               std::to_string(records.size() - position - kRecordPrefixSize) + " bytes left)");
-    }
-    const auto body = records.subspan(position + kRecordPrefixSize, length);
+    const auto [opcode, body] =
+        NextRecord(records, position, where, "summary ends inside a record prefix", "summary");
+    const uint64_t length = body.size();
     Parser parser(body, where, 0, OpcodeName(opcode) + " record", position + kRecordPrefixSize);
     switch (opcode) {
       case kOpSchema:
@@ -506,18 +518,9 @@ void McapReader::Impl::WalkChunk(const Block& block, const ChunkHeader& header,
   const Where where{&path, block.offset, true};
   size_t position = 0;
   while (position < records.size()) {
-    if (records.size() - position < kRecordPrefixSize) {
-      Fail(where, position, "chunk records end inside a record prefix");
-    }
-    const uint8_t opcode = records[position];
-    const uint64_t length = Load<uint64_t>(records.data() + position + 1);
-    if (length > records.size() - position - kRecordPrefixSize) {
-      Fail(where, position,
-           OpcodeName(opcode) + " record length " + std::to_string(length) +
-               " runs past the end of the chunk (" +
-               std::to_string(records.size() - position - kRecordPrefixSize) + " bytes left)");
-    }
-    const auto body = records.subspan(position + kRecordPrefixSize, length);
+    const auto [opcode, body] =
+        NextRecord(records, position, where, "chunk records end inside a record prefix", "chunk");
+    const uint64_t length = body.size();
     switch (opcode) {
       case kOpSchema:
       case kOpChannel:
