@@ -651,5 +651,71 @@ TEST(RenderTest, DemoFaceComposite) {
   EXPECT_THROW(LoadContent(options), RenderError);
 }
 
+// object_scale / object_position place each object before its bake: a 0.11 m sphere (the nose
+// scaled by 5) lands where asked, and the real-scene mesh it rests on (a plane touching it) gets
+// its shadow in the receiver's transfer there, while far from it nothing changes.
+TEST(RenderTest, ObjectPlacementHappensBeforeTheBake) {
+  const Vec3 target{0.2f, -0.1f, 2.0f};
+  const auto modelled = prt::MakeClownNose().Bounds();
+  const float radius = 5 * (modelled[1].x - modelled[0].x) / 2;
+  // A 1 m plane grid (5 cm) tangent to the placed sphere below it (+y is down), facing it.
+  const std::string plane = (std::filesystem::temp_directory_path() / "render_plane.obj").string();
+  {
+    std::ofstream obj(plane);
+    for (int j = 0; j <= 20; ++j) {
+      for (int i = 0; i <= 20; ++i) {
+        obj << "v " << target.x - 0.5f + 0.05f * i << " " << target.y + radius << " "
+            << target.z - 0.5f + 0.05f * j << "\n";
+      }
+    }
+    obj << "vn 0 -1 0\n";
+    for (int j = 0; j < 20; ++j) {
+      for (int i = 0; i < 20; ++i) {
+        const int a = j * 21 + i + 1, b = a + 21;
+        obj << "f " << a << "//1 " << a + 1 << "//1 " << b << "//1\n";
+        obj << "f " << a + 1 << "//1 " << b + 1 << "//1 " << b << "//1\n";
+      }
+    }
+  }
+  ContentOptions options;
+  options.anchor = Anchor::kWorld;
+  options.objects = {"nose"};
+  options.object_scale = 5;
+  options.object_position = std::array<double, 3>{target.x, target.y, target.z};
+  options.scene_mesh = plane;
+  options.bake.samples = 64;
+  const Content content = LoadContent(options);
+  ASSERT_EQ(content.objects.size(), 1u);
+  const auto placed = content.objects[0].mesh.mesh.Bounds();
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR((placed[0][k] + placed[1][k]) / 2, target[k], 1e-4) << k;
+    EXPECT_NEAR(placed[1][k] - placed[0][k], 5 * (modelled[1][k] - modelled[0][k]), 1e-4) << k;
+  }
+  ASSERT_TRUE(content.receiver.has_value());
+  const ShadowReceiver& r = *content.receiver;
+  const int n = r.bands * r.bands;
+  // The receiver vertex under the sphere and the one farthest from it (0.7 m).
+  const Vec3 touch{target.x, target.y + radius, target.z};
+  size_t contact = 0, corner = 0;
+  float nearest = 1e9f, farthest = 0;
+  for (size_t v = 0; v < r.mesh.positions.size(); ++v) {
+    const Vec3 d = r.mesh.positions[v] - touch;
+    const float distance = raytrace::Length(d);
+    if (distance < nearest) nearest = distance, contact = v;
+    if (distance > farthest) farthest = distance, corner = v;
+  }
+  ASSERT_LT(nearest, 1e-3f);
+  EXPECT_LT(r.transfer_with_virtual[contact * n], 0.5f * r.transfer_real[contact * n]);
+  EXPECT_NEAR(r.transfer_with_virtual[corner * n], r.transfer_real[corner * n],
+              0.05f * r.transfer_real[corner * n]);
+  options.object_scale = 0;
+  try {
+    LoadContent(options);
+    FAIL();
+  } catch (const RenderError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("object_scale must be > 0", 0), 0u) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace probeless::render

@@ -11,11 +11,13 @@
 // transfer of the scene-light node, both or neither).
 // Publishes render/composite (Image rgb8, the camera image's header).
 //
-// Params: mode (face | scene), objects (list: nose, cap, glasses, *.prt, *.obj, *.ply), scene_mesh,
-// shadows (bool: virtual shadows on the proxy head / scene mesh), samples, bands, backend
-// (offscreen | window), trigger (light | image: what starts a frame), tone (clamp | reinhard),
-// exposure, white, video (file), video_fps, png_dir, max_frames (0 = unlimited).
-// Exit: 0 on shutdown or after max_frames, 2 on bad params or content.
+// Params: mode (face | scene), objects (list: nose, cap, glasses, *.prt, *.obj, *.ply),
+// object_scale (1: scale about each object's bounding-box centre), object_position ([] = as
+// modelled, else [x, y, z] m in the anchor frame, where that centre goes; scene mode: the world
+// frame of scene/pose), scene_mesh, shadows (bool: virtual shadows on the proxy head / scene mesh),
+// samples, bands, backend (offscreen | window), trigger (light | image: what starts a frame), tone
+// (clamp | reinhard), exposure, white, video (file), video_fps, png_dir, max_frames (0 =
+// unlimited). Exit: 0 on shutdown or after max_frames, 2 on bad params or content.
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -45,6 +47,15 @@ int Run(int argc, char** argv) {
   }
   content_options.anchor = mode == "face" ? render::Anchor::kFace : render::Anchor::kWorld;
   content_options.objects = node.Param<std::vector<std::string>>("objects", {"nose"});
+  content_options.object_scale = node.Param("object_scale", 1.0);
+  const std::vector<double> position = node.Param("object_position", std::vector<double>{});
+  if (!position.empty()) {
+    if (position.size() != 3) {
+      throw render::RenderError("param object_position: expected [x, y, z] (metres), got " +
+                                std::to_string(position.size()) + " values");
+    }
+    content_options.object_position = {position[0], position[1], position[2]};
+  }
   content_options.scene_mesh = node.Param("scene_mesh", "");
   content_options.receiver = node.Param("shadows", true);
   content_options.bake.samples = node.Param("samples", 256);

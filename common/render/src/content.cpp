@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <string>
 
 #include "probeless/prt/demo_objects.h"
 
@@ -17,9 +18,29 @@ std::string Extension(const std::string& path) {
   return ext;
 }
 
+// Scales `mesh` about its bounding-box centre and moves that centre to `position` (if set).
+void Place(raytrace::Mesh& mesh, double scale,
+           const std::optional<std::array<double, 3>>& position) {
+  if (scale == 1.0 && !position) return;
+  const auto [lo, hi] = mesh.Bounds();
+  const raytrace::Vec3 centre{(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+  const raytrace::Vec3 target = position ? raytrace::Vec3{static_cast<float>((*position)[0]),
+                                                          static_cast<float>((*position)[1]),
+                                                          static_cast<float>((*position)[2])}
+                                         : centre;
+  const auto s = static_cast<float>(scale);
+  for (raytrace::Vec3& p : mesh.positions) {
+    p = {target.x + s * (p.x - centre.x), target.y + s * (p.y - centre.y),
+         target.z + s * (p.z - centre.z)};
+  }
+}
+
 }  // namespace
 
 Content LoadContent(const ContentOptions& options) {
+  if (!(options.object_scale > 0)) {
+    throw RenderError("object_scale must be > 0, got " + std::to_string(options.object_scale));
+  }
   Content content;
   std::vector<prt::Occluder> occluders;
   raytrace::Mesh real_mesh;
@@ -42,11 +63,16 @@ Content LoadContent(const ContentOptions& options) {
       object.anchor = options.anchor;
       const auto names = prt::DemoObjectNames();
       if (std::find(names.begin(), names.end(), entry) != names.end()) {
-        object.mesh = prt::Bake(prt::MakeDemoObject(entry), occluders, options.bake);
+        raytrace::Mesh mesh = prt::MakeDemoObject(entry);
+        Place(mesh, options.object_scale, options.object_position);
+        object.mesh = prt::Bake(mesh, occluders, options.bake);
       } else if (Extension(entry) == "prt") {
-        object.mesh = prt::LoadPrt(entry);
+        object.mesh = prt::LoadPrt(entry);  // self-occlusion survives scale and translation
+        Place(object.mesh.mesh, options.object_scale, options.object_position);
       } else if (Extension(entry) == "obj" || Extension(entry) == "ply") {
-        object.mesh = prt::Bake(raytrace::LoadMesh(entry), occluders, options.bake);
+        raytrace::Mesh mesh = raytrace::LoadMesh(entry);
+        Place(mesh, options.object_scale, options.object_position);
+        object.mesh = prt::Bake(mesh, occluders, options.bake);
       } else {
         throw RenderError("expected nose, cap, glasses or a .prt, .obj or .ply file");
       }

@@ -4,6 +4,7 @@
 // virtual objects as occluders, K&K §4.2's "differential change" and Gruber eq. 13).
 #pragma once
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,12 @@ struct ContentOptions {
   // none. Face mode always uses the proxy head.
   std::string scene_mesh;
   bool receiver = true;  // build the shadow receiver (virtual shadows on the face / scene)
+  // Placement of every object before it is baked (so the scene mesh's occlusion and the receiver's
+  // shadows see it where it is drawn): scaled by `object_scale` (> 0) about the centre of its
+  // bounding box, then, when `object_position` is set, moved so that centre lands there (anchor
+  // frame, metres; scene mode: the world frame of scene/pose). Defaults: as modelled.
+  double object_scale = 1.0;
+  std::optional<std::array<double, 3>> object_position;
   int head_resolution = 48;
   prt::BakeOptions bake;  // for meshes and demo objects baked at load time
 };
