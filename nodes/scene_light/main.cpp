@@ -14,7 +14,9 @@
 //   rendering). A frame without camera info or image yet is skipped (one warning).
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
 //   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
-//   direction_bands (2), publish_transfer (true).
+//   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
+//   0 = one uniform albedo), max_rows_per_bin (100),
+//   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -47,12 +49,15 @@ int Run(int argc, char** argv) {
   to.max_occluder_distance_m = 2 * to.radius_m;
   to.seed = static_cast<uint64_t>(node.Param<int64_t>("seed", 1));
   to.threads = node.Param("threads", 2);
+  to.analytic_unoccluded = node.Param("analytic_unoccluded", true);
   light::EstimateOptions eo;
   eo.albedo = static_cast<float>(node.Param("albedo", 0.6));
   eo.stride = node.Param("stride", 4);
   eo.robust = node.Param("robust", true);
   eo.non_negative = node.Param("non_negative", false);
   eo.direction_bands = node.Param("direction_bands", 2);
+  eo.albedo_groups = node.Param("albedo_groups", 32);
+  eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
   const bool publish_transfer = node.Param("publish_transfer", true);
   light::TransferComputer computer(to);  // throws LightError for bad options
 
@@ -68,6 +73,7 @@ int Run(int argc, char** argv) {
   std::optional<msgs::CameraInfo> info;
   std::optional<bus::Sample> image;  // the latest image sample (held)
   std::vector<float> grey, depth, normals;
+  std::vector<uint8_t> rgb;  // the image's sRGB bytes for the albedo groups
   light::TransferResult result;
   int64_t frames = 0, published = 0;
   bool warned = false;
@@ -105,9 +111,9 @@ int Run(int argc, char** argv) {
       node.Debug() << "image sequence " << img->header.sequence << " used for frame "
                    << header.sequence;
     }
-    light::GreyFromImage(*img, img.payload, view.width, view.height, &grey);
+    light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
     computer.Compute(view, {}, nullptr, &result);
-    const light::LightEstimate e = light::EstimateLight(result, grey, eo);
+    const light::LightEstimate e = light::EstimateLight(result, grey, eo, rgb);
     ++frames;
     if (e.valid) {
       bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <string>
 
@@ -20,11 +21,117 @@ bool CholeskySolve(std::vector<double> a, std::vector<double> b, int n, std::vec
   return true;
 }
 
-double Median(std::vector<double> v) {
+float Median(std::vector<float> v) {
   if (v.empty()) return 0;
   const size_t m = v.size() / 2;
   std::nth_element(v.begin(), v.begin() + m, v.end());
   return v[m];
+}
+
+// A^T W A and A^T W b (added to ata, atb; cc x cc row-major, full) for a compile-time row length:
+// rank-1 updates of a float block held in 4-wide vectors (GCC vector extension: SSE, or AVX
+// pairs with -mavx2), flushed into double every 256 rows so that long sums keep double
+// precision. Rows are padded with zeros to a multiple of 4.
+using Float4 = float __attribute__((vector_size(16)));
+
+template <int CC>
+void AccumulateFixed(const float* rows, const float* targets, const float* weight, size_t m,
+                     double* ata, double* atb) {
+  constexpr int kVectors = (CC + 3) / 4;
+  Float4 block[CC][kVectors] = {};
+  Float4 block_b[kVectors] = {};
+  int in_block = 0;
+  auto flush = [&] {
+    for (int r = 0; r < CC; ++r) {
+      for (int c = 0; c < CC; ++c) ata[r * CC + c] += block[r][c / 4][c % 4];
+      for (int k = 0; k < kVectors; ++k) block[r][k] = Float4{};
+    }
+    for (int c = 0; c < CC; ++c) atb[c] += block_b[c / 4][c % 4];
+    for (int k = 0; k < kVectors; ++k) block_b[k] = Float4{};
+    in_block = 0;
+  };
+  for (size_t i = 0; i < m; ++i) {
+    const float wi = weight[i];
+    if (!(wi > 0)) continue;
+    float padded[kVectors * 4] = {};
+    std::memcpy(padded, rows + i * CC, sizeof(float) * CC);
+    Float4 a[kVectors];
+    std::memcpy(a, padded, sizeof(a));
+    const float wt = wi * targets[i];
+    for (int k = 0; k < kVectors; ++k) block_b[k] += a[k] * wt;
+    for (int r = 0; r < CC; ++r) {
+      const float war = wi * padded[r];
+      for (int k = 0; k < kVectors; ++k) block[r][k] += a[k] * war;
+    }
+    if (++in_block == 256) flush();
+  }
+  flush();
+}
+
+void Accumulate(int cc, const float* rows, const float* targets, const float* weight, size_t m,
+                double* ata, double* atb) {
+  switch (cc) {
+    case 4:
+      return AccumulateFixed<4>(rows, targets, weight, m, ata, atb);
+    case 9:
+      return AccumulateFixed<9>(rows, targets, weight, m, ata, atb);
+    case 16:
+      return AccumulateFixed<16>(rows, targets, weight, m, ata, atb);
+    default:
+      return AccumulateFixed<25>(rows, targets, weight, m, ata, atb);
+  }
+}
+
+// targets - rows * l for a compile-time row length (float: the rows are float anyway).
+template <int CC>
+void ResidualsFixed(const float* rows, const float* targets, const double* l, size_t m,
+                    float* residual) {
+  float lf[CC];
+  for (int k = 0; k < CC; ++k) lf[k] = static_cast<float>(l[k]);
+  for (size_t i = 0; i < m; ++i) {
+    const float* a = rows + i * CC;
+    float p = 0;
+    for (int k = 0; k < CC; ++k) p += a[k] * lf[k];
+    residual[i] = targets[i] - p;
+  }
+}
+
+void Residuals(int cc, const float* rows, const float* targets, const double* l, size_t m,
+               float* residual) {
+  switch (cc) {
+    case 4:
+      return ResidualsFixed<4>(rows, targets, l, m, residual);
+    case 9:
+      return ResidualsFixed<9>(rows, targets, l, m, residual);
+    case 16:
+      return ResidualsFixed<16>(rows, targets, l, m, residual);
+    default:
+      return ResidualsFixed<25>(rows, targets, l, m, residual);
+  }
+}
+
+// Orientation cell of a transfer row for balance_normals: the direction of T's band-1 part
+// (OptimalLinearDirection's, proportional to the normal where nothing occludes) on a cube map of
+// 6 faces x 4 x 4 cells (no trigonometry per row).
+constexpr int kOrientationCells = 4;
+constexpr int kOrientationBins = 6 * kOrientationCells * kOrientationCells;
+int OrientationBin(const float* t) {
+  constexpr int kCells = kOrientationCells;
+  const float d[3] = {-t[3], -t[1], t[2]};
+  const float ax = std::abs(d[0]), ay = std::abs(d[1]), az = std::abs(d[2]);
+  int face;
+  float u, v, major;
+  if (ax >= ay && ax >= az) {
+    face = d[0] > 0 ? 0 : 1, u = d[1], v = d[2], major = ax;
+  } else if (ay >= az) {
+    face = d[1] > 0 ? 2 : 3, u = d[0], v = d[2], major = ay;
+  } else {
+    face = d[2] > 0 ? 4 : 5, u = d[0], v = d[1], major = az;
+  }
+  if (!(major > 0)) major = 1, u = v = 0;
+  const int a = std::clamp(static_cast<int>((u / major + 1) * 0.5f * kCells), 0, kCells - 1);
+  const int b = std::clamp(static_cast<int>((v / major + 1) * 0.5f * kCells), 0, kCells - 1);
+  return (face * kCells + a) * kCells + b;
 }
 
 }  // namespace
@@ -36,7 +143,7 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     throw LightError("light::SolveLight: coefficient_count must be 4, 9, 16 or 25, got " +
                      std::to_string(cc));
   }
-  const size_t m = targets.size();
+  size_t m = targets.size();
   if (rows.size() != m * cc) {
     throw LightError("light::SolveLight: " + std::to_string(rows.size()) + " row values for " +
                      std::to_string(m) + " targets x " + std::to_string(cc) + " coefficients");
@@ -44,76 +151,66 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   if (!(options.ridge >= 0) || !(options.smoothness >= 0)) {
     throw LightError("light::SolveLight: ridge and smoothness must be >= 0");
   }
+  if (options.huber_iterations < 0 || options.tukey_iterations < 0) {
+    throw LightError("light::SolveLight: huber_iterations and tukey_iterations must be >= 0");
+  }
   LightEstimate e;
   e.bands = static_cast<int>(std::lround(std::sqrt(cc)));
   e.pixels = static_cast<int>(m);
   if (static_cast<int>(m) < std::max(options.min_pixels, cc)) return e;
 
   // Prior weights: normal-orientation balancing (see EstimateOptions::balance_normals).
-  std::vector<double> prior(m, 1.0);
+  std::vector<float> prior(m, 1.0f);
+  std::vector<float> thin_rows, thin_targets;
   if (options.balance_normals) {
-    // Cube-map bins of the orientation: 6 faces x 4 x 4 cells (no trigonometry per row).
-    constexpr int kCells = 4, kBins = 6 * kCells * kCells;
-    std::vector<int> bin(m), count(kBins, 0);
+    std::vector<int> bin(m), count(kOrientationBins, 0);
     for (size_t i = 0; i < m; ++i) {
-      const float* t = rows.data() + i * cc;
-      const float d[3] = {-t[3], -t[1], t[2]};  // band-1 direction (OptimalLinearDirection)
-      const float ax = std::abs(d[0]), ay = std::abs(d[1]), az = std::abs(d[2]);
-      int face, a, b;
-      float u, v, major;
-      if (ax >= ay && ax >= az) {
-        face = d[0] > 0 ? 0 : 1, u = d[1], v = d[2], major = ax;
-      } else if (ay >= az) {
-        face = d[1] > 0 ? 2 : 3, u = d[0], v = d[2], major = ay;
-      } else {
-        face = d[2] > 0 ? 4 : 5, u = d[0], v = d[1], major = az;
-      }
-      if (!(major > 0)) major = 1, u = v = 0;
-      a = std::clamp(static_cast<int>((u / major + 1) * 0.5f * kCells), 0, kCells - 1);
-      b = std::clamp(static_cast<int>((v / major + 1) * 0.5f * kCells), 0, kCells - 1);
-      bin[i] = (face * kCells + a) * kCells + b;
+      bin[i] = OrientationBin(rows.data() + i * cc);
       ++count[bin[i]];
+    }
+    // Thinning: a bin with more than max_rows_per_bin rows keeps every k-th of them (its total
+    // weight is the same after balancing); the rare orientations that pin the light down keep
+    // all their rows, the big planes lose most of theirs.
+    const int kCap = options.max_rows_per_bin;
+    if (kCap > 0) {
+      thin_rows.resize(m * cc);
+      thin_targets.resize(m);
+      std::vector<int> seen(kOrientationBins, 0), kept(kOrientationBins, 0);
+      size_t n = 0;
+      for (size_t i = 0; i < m; ++i) {
+        const int b = bin[i];
+        const int k = (count[b] + kCap - 1) / kCap;
+        if (seen[b]++ % k != 0) continue;
+        std::copy_n(rows.data() + i * cc, cc, &thin_rows[n * cc]);
+        thin_targets[n] = targets[i];
+        bin[n++] = b;
+        ++kept[b];
+      }
+      if (n < m) {
+        thin_rows.resize(n * cc);
+        thin_targets.resize(n);
+        rows = thin_rows;
+        targets = thin_targets;
+        m = n;
+        count = kept;
+        prior.resize(m);
+      }
     }
     int used = 0;
     for (int c : count) used += c > 0;
-    for (size_t i = 0; i < m; ++i) prior[i] = static_cast<double>(m) / (used * count[bin[i]]);
+    for (size_t i = 0; i < m; ++i) {
+      prior[i] = static_cast<float>(static_cast<double>(m) / (used * count[bin[i]]));
+    }
   }
-  std::vector<double> weight = prior, residual(m, 0.0), l(cc, 0.0);
-  std::vector<double> ata(static_cast<size_t>(cc) * cc), atb(cc);
+  std::vector<float> weight = prior, residual(m, 0.0f), abs_r(m);
+  std::vector<double> l(cc, 0.0), ata(static_cast<size_t>(cc) * cc), atb(cc);
   std::vector<std::array<double, sh::kMaxCoefficients>> penalty;  // non-negativity rows
-  const auto constraint_dirs = sh::FibonacciSphere(64);
   double base_trace = 0;
 
   auto solve = [&]() -> bool {
     std::fill(ata.begin(), ata.end(), 0.0);
     std::fill(atb.begin(), atb.end(), 0.0);
-    // Rank-1 updates into a float block (contiguous, vectorised), flushed into double every 256
-    // rows so that long sums keep double precision.
-    float block[sh::kMaxCoefficients * sh::kMaxCoefficients];
-    float block_b[sh::kMaxCoefficients];
-    std::fill(block, block + cc * cc, 0.0f);
-    std::fill(block_b, block_b + cc, 0.0f);
-    int in_block = 0;
-    auto flush = [&] {
-      for (int k = 0; k < cc * cc; ++k) ata[k] += block[k];
-      for (int k = 0; k < cc; ++k) atb[k] += block_b[k];
-      std::fill(block, block + cc * cc, 0.0f);
-      std::fill(block_b, block_b + cc, 0.0f);
-      in_block = 0;
-    };
-    for (size_t i = 0; i < m; ++i) {
-      const float wi = static_cast<float>(weight[i]);
-      if (wi <= 0) continue;
-      const float* a = rows.data() + i * cc;
-      for (int r = 0; r < cc; ++r) {
-        const float war = wi * a[r];
-        block_b[r] += war * targets[i];
-        float* row = &block[r * cc];
-        for (int c = 0; c < cc; ++c) row[c] += war * a[c];
-      }
-      if (++in_block == 256) flush();
-    }
-    flush();
+    Accumulate(cc, rows.data(), targets.data(), weight.data(), m, ata.data(), atb.data());
     double trace = 0;
     for (int r = 0; r < cc; ++r) trace += ata[r * cc + r];
     if (base_trace == 0) base_trace = trace;
@@ -121,51 +218,58 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     const double mu2 = 10.0 * base_trace / cc;
     for (const auto& y : penalty) {
       for (int r = 0; r < cc; ++r) {
-        for (int c = 0; c <= r; ++c) ata[r * cc + c] += mu2 * y[r] * y[c];
+        for (int c = 0; c < cc; ++c) ata[r * cc + c] += mu2 * y[r] * y[c];
       }
     }
     const double ridge = options.ridge * (trace > 0 ? trace / cc : 1.0);
     const double smooth = options.smoothness * (trace > 0 ? trace / cc : 1.0);
     for (int r = 0; r < cc; ++r) {
-      const int l = sh::DegreeOf(r);
-      ata[r * cc + r] += ridge + smooth * double(l * (l + 1)) * double(l * (l + 1));
-      for (int c = r + 1; c < cc; ++c) ata[r * cc + c] = ata[c * cc + r];
+      const int deg = sh::DegreeOf(r);
+      ata[r * cc + r] += ridge + smooth * double(deg * (deg + 1)) * double(deg * (deg + 1));
     }
     return CholeskySolve(ata, atb, cc, &l);
   };
   auto residuals = [&] {
-    for (size_t i = 0; i < m; ++i) {
-      const float* a = rows.data() + i * cc;
-      double p = 0;
-      for (int k = 0; k < cc; ++k) p += a[k] * l[k];
-      residual[i] = targets[i] - p;
-    }
+    Residuals(cc, rows.data(), targets.data(), l.data(), m, residual.data());
   };
   if (!solve()) return e;
   if (options.robust) {
     double rms_t = 0;
     for (float t : targets) rms_t += double(t) * t;
     rms_t = std::sqrt(rms_t / m);
-    for (int it = 0; it < 5; ++it) {
+    const int iterations = options.huber_iterations + options.tukey_iterations;
+    for (int it = 0; it < iterations; ++it) {
       residuals();
-      std::vector<double> abs_r(m);
       for (size_t i = 0; i < m; ++i) abs_r[i] = std::abs(residual[i]);
-      const double sigma = std::max(1.4826 * Median(abs_r), 1e-7 * rms_t + 1e-12);
-      const bool tukey = it >= 2;  // Huber first (convex, reliable start), then redescending
-      for (size_t i = 0; i < m; ++i) {
-        const double u = abs_r[i] / sigma;
-        if (tukey) {
-          const double c = 4.685;
-          weight[i] = prior[i] * (u < c ? (1 - (u / c) * (u / c)) * (1 - (u / c) * (u / c)) : 0.0);
-        } else {
-          const double k = 1.345;
-          weight[i] = prior[i] * (u <= k ? 1.0 : k / u);
+      // MAD scale from every k-th residual (at most ~4096 of them: the median's cost otherwise
+      // dominates the estimate; the scale only sets the reweighting thresholds).
+      const size_t k = std::max<size_t>(1, m / 4096);
+      std::vector<float> sample;
+      sample.reserve(m / k + 1);
+      for (size_t i = 0; i < m; i += k) sample.push_back(abs_r[i]);
+      const float sigma =
+          static_cast<float>(std::max(1.4826 * Median(std::move(sample)), 1e-7 * rms_t + 1e-12));
+      const float inv_sigma = 1.0f / sigma;
+      // Huber first (convex, a reliable start), then Tukey's biweight (redescending).
+      if (it >= options.huber_iterations) {
+        constexpr float c = 4.685f, inv_c = 1.0f / c;
+        for (size_t i = 0; i < m; ++i) {
+          const float u = abs_r[i] * inv_sigma * inv_c;
+          const float q = 1 - u * u;
+          weight[i] = u < 1 ? prior[i] * q * q : 0.0f;
+        }
+      } else {
+        constexpr float k = 1.345f;
+        for (size_t i = 0; i < m; ++i) {
+          const float u = abs_r[i] * inv_sigma;
+          weight[i] = u <= k ? prior[i] : prior[i] * k / u;
         }
       }
       if (!solve()) return e;
     }
   }
   if (options.non_negative && cc >= 4) {
+    const auto constraint_dirs = sh::FibonacciSphere(64);
     for (int it = 0; it < 4; ++it) {
       bool added = false;
       for (const auto& d : constraint_dirs) {
@@ -185,11 +289,13 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   double sw = 0, swr2 = 0, swt = 0, swt2 = 0;
   for (size_t i = 0; i < m; ++i) {
     sw += weight[i];
-    swr2 += weight[i] * residual[i] * residual[i];
-    swt += weight[i] * targets[i];
+    swr2 += double(weight[i]) * residual[i] * residual[i];
+    swt += double(weight[i]) * targets[i];
   }
   const double mean_t = sw > 0 ? swt / sw : 0;
-  for (size_t i = 0; i < m; ++i) swt2 += weight[i] * (targets[i] - mean_t) * (targets[i] - mean_t);
+  for (size_t i = 0; i < m; ++i) {
+    swt2 += double(weight[i]) * (targets[i] - mean_t) * (targets[i] - mean_t);
+  }
   e.rms_residual = sw > 0 ? std::sqrt(swr2 / sw) : 0;
   const double r2 = swt2 > 0 ? std::clamp(1.0 - swr2 / swt2, 0.0, 1.0) : 0.0;
   e.confidence = static_cast<float>(r2 * std::min(1.0, sw / (20.0 * cc)));
@@ -203,18 +309,26 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     // A low-band model of max(0, n.d) is biased by the pixels facing away from the light (only
     // ambient reaches them): refit on the pixels facing the current estimate (n.d > 0.05, n from
     // T's band 1), where the shading is exactly linear in n.
-    for (int it = 0; it < 2 && linear.valid && options.lit_refits; ++it) {
+    if (linear.valid && options.lit_refits) {
+      std::vector<sh::Vec3> normal(m);
+      for (size_t i = 0; i < m; ++i) normal[i] = sh::OptimalLinearDirection(rows.data() + i * cc);
       std::vector<float> lit_rows, lit_targets;
-      const auto& d = linear.dominant_direction;
-      for (size_t i = 0; i < m; ++i) {
-        const sh::Vec3 n = sh::OptimalLinearDirection(rows.data() + i * cc);
-        if (n[0] * d[0] + n[1] * d[1] + n[2] * d[2] <= 0.05) continue;
-        lit_rows.insert(lit_rows.end(), &linear_rows[i * dc], &linear_rows[i * dc] + dc);
-        lit_targets.push_back(targets[i]);
+      lit_rows.reserve(m * dc);
+      lit_targets.reserve(m);
+      for (int it = 0; it < 2; ++it) {
+        lit_rows.clear();
+        lit_targets.clear();
+        const auto& d = linear.dominant_direction;
+        for (size_t i = 0; i < m; ++i) {
+          const sh::Vec3& n = normal[i];
+          if (n[0] * d[0] + n[1] * d[1] + n[2] * d[2] <= 0.05) continue;
+          lit_rows.insert(lit_rows.end(), &linear_rows[i * dc], &linear_rows[i * dc] + dc);
+          lit_targets.push_back(targets[i]);
+        }
+        const LightEstimate refit = SolveLight(lit_rows, lit_targets, dc, options);
+        if (!refit.valid) break;
+        linear = refit;
       }
-      const LightEstimate refit = SolveLight(lit_rows, lit_targets, dc, options);
-      if (!refit.valid) break;
-      linear = refit;
     }
     if (linear.valid) {
       e.dominant_direction = linear.dominant_direction;
@@ -234,7 +348,7 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
 }
 
 LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
-                            const EstimateOptions& options) {
+                            const EstimateOptions& options, std::span<const uint8_t> colour) {
   const size_t pixels = static_cast<size_t>(transfer.width) * transfer.height;
   if (intensity.size() != pixels) {
     throw LightError("light::EstimateLight: intensity has " + std::to_string(intensity.size()) +
@@ -254,24 +368,132 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
                      std::to_string(options.bands));
   }
   if (!(options.albedo > 0)) throw LightError("light::EstimateLight: albedo must be > 0");
+  if (!colour.empty() && colour.size() != 3 * pixels) {
+    throw LightError("light::EstimateLight: colour has " + std::to_string(colour.size()) +
+                     " bytes, expected 3 x " + std::to_string(transfer.width) + "x" +
+                     std::to_string(transfer.height));
+  }
+  if (options.albedo_groups < 0 || options.albedo_groups > 255 || options.albedo_iterations < 1) {
+    throw LightError(
+        "light::EstimateLight: albedo_groups must be 0..255 and albedo_iterations >= 1");
+  }
+  const bool grouped = !colour.empty() && options.albedo_groups > 0;
+  const int cells = options.albedo_groups;
+  // OursFast: fit to the exact sparse samples (every stride / sample_step-th of them), not to the
+  // interpolated pixels; the full variant: every stride-th pixel.
+  const int step = transfer.sample_step;
+  const bool sparse = step > 1 && transfer.sample_width > 0 && transfer.sample_height > 0;
+  if (sparse && (transfer.samples.size() !=
+                     static_cast<size_t>(transfer.sample_width) * transfer.sample_height * cc ||
+                 transfer.sample_valid.size() !=
+                     static_cast<size_t>(transfer.sample_width) * transfer.sample_height)) {
+    throw LightError("light::EstimateLight: sample buffer sizes do not match " +
+                     std::to_string(transfer.sample_width) + "x" +
+                     std::to_string(transfer.sample_height));
+  }
+  const int s = sparse ? std::max(1, (options.stride + step / 2) / step) : options.stride;
+  const int grid_w = sparse ? transfer.sample_width : transfer.width;
+  const int grid_h = sparse ? transfer.sample_height : transfer.height;
+  const float* t_data = sparse ? transfer.samples.data() : transfer.transfer.data();
+  const uint8_t* v_data = sparse ? transfer.sample_valid.data() : transfer.valid.data();
   std::vector<float> rows, targets;
-  const int s = options.stride;
-  rows.reserve(pixels / (s * s) * cc_out + cc_out);
-  targets.reserve(pixels / (s * s) + 1);
+  std::vector<uint16_t> group;
+  const size_t max_rows = static_cast<size_t>((grid_w + s - 1) / s) * ((grid_h + s - 1) / s);
+  rows.resize(max_rows * cc_out);
+  targets.resize(max_rows);
+  std::vector<float> rgb;  // linear colour per row (grouped)
+  if (grouped) group.resize(max_rows), rgb.resize(3 * max_rows);
+  size_t m = 0;
   const float inv_albedo = 1.0f / options.albedo;
-  for (int y = s / 2; y < transfer.height; y += s) {
-    for (int x = s / 2; x < transfer.width; x += s) {
-      const size_t p = static_cast<size_t>(y) * transfer.width + x;
+  for (int y = s / 2; y < grid_h; y += s) {
+    const int py = sparse ? std::min(y * step + step / 2, transfer.height - 1) : y;
+    for (int x = s / 2; x < grid_w; x += s) {
+      const size_t g = static_cast<size_t>(y) * grid_w + x;
+      const int px = sparse ? std::min(x * step + step / 2, transfer.width - 1) : x;
+      const size_t p = static_cast<size_t>(py) * transfer.width + px;
       const float i = intensity[p];
-      if (!transfer.valid[p] || !(i >= options.min_intensity) || !(i <= options.max_intensity)) {
-        continue;
+      if (!v_data[g] || !(i >= options.min_intensity) || !(i <= options.max_intensity)) continue;
+      if (grouped) {
+        const float r = SrgbToLinear(colour[3 * p]), gr = SrgbToLinear(colour[3 * p + 1]),
+                    b = SrgbToLinear(colour[3 * p + 2]);
+        if (!(r + gr + b > 0)) continue;
+        rgb[3 * m] = r, rgb[3 * m + 1] = gr, rgb[3 * m + 2] = b;
       }
-      const float* t = &transfer.transfer[p * cc];
-      rows.insert(rows.end(), t, t + cc_out);
-      targets.push_back(i * inv_albedo);
+      std::copy_n(t_data + g * cc, cc_out, &rows[m * cc_out]);
+      targets[m++] = i * inv_albedo;
     }
   }
-  return SolveLight(rows, targets, cc_out, options);
+  rows.resize(m * cc_out);
+  targets.resize(m);
+  if (!grouped) return SolveLight(rows, targets, cc_out, options);
+  const size_t usable = m;  // LightEstimate::pixels: before thinning, as SolveLight reports it
+  // Thin the big orientation bins here already (SolveLight would do it in every alternation), so
+  // that the albedo updates run over the same few thousand rows.
+  if (options.balance_normals && options.max_rows_per_bin > 0) {
+    std::vector<int> bin(m), count(kOrientationBins, 0), seen(kOrientationBins, 0);
+    for (size_t i = 0; i < m; ++i) ++count[bin[i] = OrientationBin(&rows[i * cc_out])];
+    size_t n = 0;
+    for (size_t i = 0; i < m; ++i) {
+      const int k = (count[bin[i]] + options.max_rows_per_bin - 1) / options.max_rows_per_bin;
+      if (seen[bin[i]]++ % k != 0) continue;
+      std::copy_n(&rows[i * cc_out], cc_out, &rows[n * cc_out]);
+      std::copy_n(&rgb[3 * i], 3, &rgb[3 * n]);
+      targets[n++] = targets[i];
+    }
+    m = n;
+    rows.resize(m * cc_out);
+    targets.resize(m);
+  }
+  // Chromaticity cells of the linear colour (the albedo's under white light).
+  group.resize(m);
+  for (size_t i = 0; i < m; ++i) {
+    const float r = rgb[3 * i], gr = rgb[3 * i + 1], b = rgb[3 * i + 2];
+    const float sum = r + gr + b;
+    const int rc = std::min(cells - 1, static_cast<int>(r / sum * cells));
+    const int gc = std::min(cells - 1, static_cast<int>(gr / sum * cells));
+    group[i] = static_cast<uint16_t>(rc * cells + gc);
+  }
+  // Per-group albedo (relative to options.albedo), alternating with the light.
+  std::vector<float> scaled(targets);
+  const size_t group_count = static_cast<size_t>(cells) * cells;
+  std::vector<double> sum_ip(group_count), sum_pp(group_count);
+  std::vector<int> count(group_count, 0);
+  std::vector<float> scale(group_count, 1.0f);
+  for (size_t i = 0; i < m; ++i) ++count[group[i]];
+  LightEstimate e;
+  EstimateOptions inner = options;
+  inner.direction_bands = 0;  // the direction fits only matter for the final light
+  for (int it = 0; it < options.albedo_iterations; ++it) {
+    const bool last = it + 1 == options.albedo_iterations;
+    e = SolveLight(rows, scaled, cc_out, last ? options : inner);
+    if (!e.valid || last) break;
+    std::fill(sum_ip.begin(), sum_ip.end(), 0.0);
+    std::fill(sum_pp.begin(), sum_pp.end(), 0.0);
+    for (size_t i = 0; i < m; ++i) {
+      double p = 0;
+      for (int k = 0; k < cc_out; ++k) p += rows[i * cc_out + k] * e.coefficients[k];
+      if (!(p > 0)) continue;
+      sum_ip[group[i]] += targets[i] * p;
+      sum_pp[group[i]] += p * p;
+    }
+    // Normalise so that the row-weighted mean albedo stays options.albedo (the light's scale).
+    double total = 0;
+    size_t rows_scaled = 0;
+    for (size_t g = 0; g < scale.size(); ++g) {
+      if (count[g] >= 16 && sum_pp[g] > 0 && sum_ip[g] > 0) {
+        scale[g] = static_cast<float>(sum_ip[g] / sum_pp[g]);
+        total += double(scale[g]) * count[g];
+        rows_scaled += count[g];
+      }
+    }
+    const float mean = rows_scaled > 0 ? static_cast<float>(total / rows_scaled) : 1.0f;
+    for (size_t g = 0; g < scale.size(); ++g) {
+      scale[g] = count[g] >= 16 && sum_pp[g] > 0 && sum_ip[g] > 0 ? scale[g] / mean : 1.0f;
+    }
+    for (size_t i = 0; i < m; ++i) scaled[i] = targets[i] / scale[group[i]];
+  }
+  e.pixels = static_cast<int>(usable);
+  return e;
 }
 
 }  // namespace probeless::light

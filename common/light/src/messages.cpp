@@ -74,13 +74,16 @@ void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte>
 }
 
 void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,
-                   int height, std::vector<float>* grey) {
+                   int height, std::vector<float>* grey, std::vector<uint8_t>* rgb) {
   if (static_cast<int>(image.width) != width || static_cast<int>(image.height) != height) {
     throw LightError("light::GreyFromImage: image is " + std::to_string(image.width) + "x" +
                      std::to_string(image.height) + ", geometry is " + std::to_string(width) + "x" +
                      std::to_string(height));
   }
   grey->resize(static_cast<size_t>(width) * height);
+  const bool colour =
+      image.encoding == msgs::Encoding::kRgb8 || image.encoding == msgs::Encoding::kBgr8;
+  if (rgb != nullptr) rgb->resize(colour ? 3 * grey->size() : 0);
   for (int y = 0; y < height; ++y) {
     const auto row = msgs::ImageRow<uint8_t>(image, payload, y);
     float* dst = grey->data() + static_cast<size_t>(y) * width;
@@ -91,6 +94,15 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
           dst[x] = (SrgbToLinear(row[3 * x]) + SrgbToLinear(row[3 * x + 1]) +
                     SrgbToLinear(row[3 * x + 2])) *
                    (1.0f / 3);
+        }
+        if (rgb != nullptr) {
+          uint8_t* out = rgb->data() + 3 * static_cast<size_t>(y) * width;
+          const bool bgr = image.encoding == msgs::Encoding::kBgr8;
+          for (int x = 0; x < width; ++x) {
+            out[3 * x] = row[3 * x + (bgr ? 2 : 0)];
+            out[3 * x + 1] = row[3 * x + 1];
+            out[3 * x + 2] = row[3 * x + (bgr ? 0 : 2)];
+          }
         }
         break;
       case msgs::Encoding::kMono8:

@@ -96,4 +96,80 @@ AuxiliaryStorage RenderAuxiliaryViews(const raytrace::Scene& scene, const raytra
   return out;
 }
 
+raytrace::LightingGroundTruth SurfaceLightingTruth(const raytrace::Scene& scene,
+                                                   const sim::SimFrame& frame, int stride) {
+  using raytrace::Vec3;
+  if (stride < 1) throw LightError("light::SurfaceLightingTruth: stride must be >= 1");
+  const raytrace::Camera& cam = frame.camera;
+  const raytrace::Transform& c2w = cam.camera_to_world;
+  const raytrace::Mat3 w2c = c2w.rotation.Transposed();
+  const auto& r = frame.render;
+  std::vector<Vec3> points;
+  for (int v = stride / 2; v < r.height; v += stride) {
+    for (int u = stride / 2; u < r.width; u += stride) {
+      const float d = r.depth_m[static_cast<size_t>(v) * r.width + u];
+      if (!(d > 0)) continue;
+      points.push_back(c2w.Apply({static_cast<float>(d * (u - cam.cx) / cam.fx),
+                                  static_cast<float>(d * (v - cam.cy) / cam.fy), d}));
+    }
+  }
+  const Vec3 eye{static_cast<float>(c2w.translation[0]), static_cast<float>(c2w.translation[1]),
+                 static_cast<float>(c2w.translation[2])};
+  if (points.empty()) return raytrace::LightingAt(scene, eye, c2w.rotation);
+  // Per light: mean RGB irradiance and mean (grey irradiance x unit direction) over the points.
+  struct Sum {
+    Vec3 irradiance{0, 0, 0};
+    Vec3 weighted_direction{0, 0, 0};
+  };
+  std::vector<Sum> sums;
+  raytrace::LightingGroundTruth out;
+  auto add = [&](size_t light, Vec3 d_world, Vec3 irradiance) {
+    const Vec3 d = raytrace::Normalize(w2c * d_world);
+    const auto y = raytrace::ShBasis9(d);
+    for (int i = 0; i < 9; ++i) out.sh[i] += irradiance * y[i];
+    if (sums.size() <= light) sums.resize(light + 1);
+    sums[light].irradiance += irradiance;
+    sums[light].weighted_direction += d * ((irradiance.x + irradiance.y + irradiance.z) / 3);
+  };
+  const auto& directional = scene.directional_lights();
+  const auto& point = scene.point_lights();
+  for (const Vec3& p : points) {
+    for (size_t k = 0; k < directional.size(); ++k) {
+      if (directional[k].enabled) add(k, directional[k].direction, directional[k].irradiance);
+    }
+    for (size_t k = 0; k < point.size(); ++k) {
+      if (!point[k].enabled) continue;
+      const Vec3 to = point[k].position - p;
+      const float r2 = raytrace::Dot(to, to);
+      if (r2 > 0) add(directional.size() + k, to, point[k].intensity / r2);
+    }
+  }
+  const float inv = 1.0f / static_cast<float>(points.size());
+  for (auto& c : out.sh) c *= inv;
+  // The environment is the same at every point: LightingAt at the camera minus its lights.
+  const raytrace::LightingGroundTruth at_eye = raytrace::LightingAt(scene, eye, c2w.rotation);
+  std::array<Vec3, 9> lights_at_eye{};
+  auto add_eye = [&](Vec3 d_world, Vec3 irradiance) {
+    const auto y = raytrace::ShBasis9(raytrace::Normalize(w2c * d_world));
+    for (int i = 0; i < 9; ++i) lights_at_eye[i] += irradiance * y[i];
+  };
+  for (const auto& l : directional) {
+    if (l.enabled) add_eye(l.direction, l.irradiance);
+  }
+  for (const auto& l : point) {
+    const Vec3 to = l.position - eye;
+    if (l.enabled && raytrace::Dot(to, to) > 0) add_eye(to, l.intensity / raytrace::Dot(to, to));
+  }
+  for (int i = 0; i < 9; ++i) out.sh[i] += at_eye.sh[i] - lights_at_eye[i];
+  for (const Sum& s : sums) {
+    const float mean = (s.irradiance.x + s.irradiance.y + s.irradiance.z) / 3 * inv;
+    const float len = raytrace::Length(s.weighted_direction);
+    if (mean > out.dominant_irradiance && len > 0) {
+      out.dominant_irradiance = mean;
+      out.dominant_direction = s.weighted_direction / len;
+    }
+  }
+  return out;
+}
+
 }  // namespace probeless::light

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "parallel.h"
+#include "probeless/sh/sh.h"
 
 namespace probeless::light {
 namespace {
@@ -121,6 +122,75 @@ TransferComputer::TransferComputer(const TransferOptions& options)
   for (auto& o : offsets_) {
     o = 0.1f + 0.9f * static_cast<float>(static_cast<double>(rng() >> 11) / 9007199254740992.0);
   }
+  // (A_l / pi) times the normalisation of Y_lm as sh::EvaluateBasis computes it (sqrt(2) for
+  // m != 0), so that AddClampedCosine needs no square roots per pixel.
+  const int bands = directions_.bands();
+  for (int l = 0; l < bands; ++l) {
+    double ratio = 1;  // (l - m)! / (l + m)!
+    for (int m = 0; m <= l; ++m) {
+      if (m > 0) ratio /= static_cast<double>((l + m) * (l - m + 1));
+      const double k_lm = std::sqrt((2 * l + 1) / (4 * std::numbers::pi) * ratio);
+      const double a = sh::ClampedCosineCoefficient(l) / std::numbers::pi;
+      clamped_[l * (l + 1) + m] = static_cast<float>(a * k_lm * (m > 0 ? std::numbers::sqrt2 : 1));
+    }
+  }
+}
+
+namespace {
+
+// out[k] += clamped[l (l + 1) + |m|] * Q_l^m(z) * (1, Re or Im of (x + i y)^m): the recurrence of
+// sh::EvaluateBasis (Q_l^m = P_l^m(z) / sin^m, Condon-Shortley phase) in float, unrolled for a
+// compile-time band count.
+template <int kBands>
+inline void AddClampedCosineFixed(const float* clamped, float x, float y, float z, float* out) {
+  float c = 1, s = 0, q_mm = 1;
+  for (int m = 0; m < kBands; ++m) {
+    if (m > 0) {
+      const float c_next = c * x - s * y;
+      s = c * y + s * x;
+      c = c_next;
+      q_mm *= -static_cast<float>(2 * m - 1);
+    }
+    float q_prev2 = 0, q_prev = 0;
+    for (int l = m; l < kBands; ++l) {
+      float q;
+      if (l == m) {
+        q = q_mm;
+      } else if (l == m + 1) {
+        q = z * static_cast<float>(2 * m + 1) * q_prev;
+      } else {
+        q = (static_cast<float>(2 * l - 1) * z * q_prev - static_cast<float>(l + m - 1) * q_prev2) *
+            (1.0f / static_cast<float>(l - m));
+      }
+      const float v = clamped[l * (l + 1) + m] * q;
+      if (m == 0) {
+        out[l * (l + 1)] += v;
+      } else {
+        out[l * (l + 1) + m] += v * c;
+        out[l * (l + 1) - m] += v * s;
+      }
+      q_prev2 = q_prev;
+      q_prev = q;
+    }
+  }
+}
+
+}  // namespace
+
+void TransferComputer::AddClampedCosine(float x, float y, float z, float* out) const {
+  // clamped_ holds (A_l / pi) times the Y_lm normalisation at indices l (l + 1) + m, m >= 0.
+  switch (directions_.bands()) {
+    case 1:
+      return AddClampedCosineFixed<1>(clamped_.data(), x, y, z, out);
+    case 2:
+      return AddClampedCosineFixed<2>(clamped_.data(), x, y, z, out);
+    case 3:
+      return AddClampedCosineFixed<3>(clamped_.data(), x, y, z, out);
+    case 4:
+      return AddClampedCosineFixed<4>(clamped_.data(), x, y, z, out);
+    default:
+      return AddClampedCosineFixed<5>(clamped_.data(), x, y, z, out);
+  }
 }
 
 TransferComputer::~TransferComputer() = default;
@@ -145,6 +215,7 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
   const float max_occ2 = options_.max_occluder_distance_m * options_.max_occluder_distance_m;
   const float bias = options_.depth_bias_m, bias_rel = options_.depth_bias_rel;
   const bool do_indirect = light != nullptr && indirect != nullptr;
+  const bool analytic = options_.analytic_unoccluded;
   const float* lut = Srgb().v;
   // eq. 10-11 patch area: the ~N/2 directions of a hemisphere share the disc pi r^2.
   const float patch = kPi * radius * radius * 2.0f / n_dir;
@@ -246,7 +317,8 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
           const float cos_a = (s0 * om[0] + s1 * om[1] + s2 * om[2]) * inv;
           k_vis = std::min(k_vis, std::min(chi, 1.0f - cos_a) * inv_chi);
         }
-        vis[j] = k_vis * cosn;
+        // analytic_unoccluded: only the occluded part is sampled (subtracted below).
+        vis[j] = analytic ? (k_vis - 1) * cosn : k_vis * cosn;
       }
       // T_n(x) = sum_j K(x, w_j) (w_j . n) Y_n(w_j) 4 pi / (N pi) (eq. 6): contiguous, SIMD.
       std::fill(t_out, t_out + cc, 0.0f);
@@ -266,6 +338,8 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
           for (int k = 0; k < cc; ++k) t_out[k] += s * wj[k];
         }
       }
+      // + (A_l / pi) Y_n(n): the exact unoccluded clamped cosine (Ramamoorthi & Hanrahan 2001).
+      if (analytic) AddClampedCosine(nx, ny, nz, t_out);
       if (do_indirect) std::copy(ind, ind + 3, indirect + 3 * o);
     }
   }
@@ -295,7 +369,12 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
   }
   const int step = options_.subsample;
   const int threads = options_.threads;
+  out->sample_step = step;
+  out->sample_width = step == 1 ? 0 : (w + step - 1) / step;
+  out->sample_height = step == 1 ? 0 : (h + step - 1) / step;
   if (step == 1) {
+    out->samples.clear();
+    out->sample_valid.clear();
     internal::ParallelRows(threads, h, 8, [&](int begin, int end) {
       ComputeRows(g, aux, light, 1, w, begin, end, out->transfer.data(), out->valid.data(),
                   light ? out->indirect.data() : nullptr);
@@ -303,13 +382,15 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
     return;
   }
   // OursFast (§5.1): every step-th pixel, then bicubic (Catmull-Rom) upsampling.
-  const int lw = (w + step - 1) / step, lh = (h + step - 1) / step;
+  const int lw = out->sample_width, lh = out->sample_height;
   const size_t low = static_cast<size_t>(lw) * lh;
-  low_transfer_.resize(low * cc);
-  low_valid_.resize(low);
+  std::vector<float>& low_transfer = out->samples;
+  std::vector<uint8_t>& low_valid = out->sample_valid;
+  low_transfer.resize(low * cc);
+  low_valid.resize(low);
   low_indirect_.resize(light ? 3 * low : 0);
   internal::ParallelRows(threads, lh, 2, [&](int begin, int end) {
-    ComputeRows(g, aux, light, step, lw, begin, end, low_transfer_.data(), low_valid_.data(),
+    ComputeRows(g, aux, light, step, lw, begin, end, low_transfer.data(), low_valid.data(),
                 light ? low_indirect_.data() : nullptr);
   });
   // Fill invalid low-resolution samples from valid 8-neighbours (3 passes) so that edges do not
@@ -317,10 +398,10 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
   const int channels = cc + (light ? 3 : 0);
   std::vector<float> merged(low * channels);
   for (size_t i = 0; i < low; ++i) {
-    std::copy_n(&low_transfer_[i * cc], cc, &merged[i * channels]);
+    std::copy_n(&low_transfer[i * cc], cc, &merged[i * channels]);
     if (light) std::copy_n(&low_indirect_[3 * i], 3, &merged[i * channels + cc]);
   }
-  std::vector<uint8_t> ok(low_valid_.begin(), low_valid_.end()), next_ok = ok;
+  std::vector<uint8_t> ok(low_valid.begin(), low_valid.end()), next_ok = ok;
   for (int pass = 0; pass < 3; ++pass) {
     for (int y = 0; y < lh; ++y) {
       for (int x = 0; x < lw; ++x) {

@@ -26,7 +26,9 @@ struct EstimateOptions {
   // is free, band 1 nearly so; it keeps bands 2-3 from absorbing what a scene with few normal
   // orientations cannot tell apart (a floor and a wall say little about band 2).
   double smoothness = 1e-3;
-  bool robust = true;         // IRLS: 2 Huber then 3 Tukey iterations, MAD scale
+  bool robust = true;  // IRLS: huber_iterations, then tukey_iterations reweighted solves, MAD scale
+  int huber_iterations = 2;   // Huber (k = 1.345) reweightings (convex; a reliable start)
+  int tukey_iterations = 3;   // Tukey biweight (c = 4.685) reweightings (rejects gross outliers)
   bool non_negative = false;  // penalise negative radiance at 64 Fibonacci directions
   int min_pixels = 32;        // fewer usable pixels -> invalid estimate
   // Balances normal orientations: every row is weighted by 1 / (rows in its orientation bin),
@@ -35,6 +37,11 @@ struct EstimateOptions {
   // (floor, walls) dominate the fit and the few pixels with other normals that pin the direction
   // down are drowned or rejected as outliers.
   bool balance_normals = true;
+  // With balance_normals: an orientation bin with more rows than this keeps every k-th of them
+  // (0 = all). The bin's total weight is unchanged; the big planes of a room lose most of their
+  // rows, the rare orientations keep all of theirs — the solve's cost drops with little effect
+  // on the result (docs/light.md).
+  int max_rows_per_bin = 100;
   // SH bands of the estimated light (2..bands of the transfer; 0 = all bands of the transfer):
   // the first bands^2 columns of T enter the system.
   int bands = 0;
@@ -47,6 +54,11 @@ struct EstimateOptions {
   // Refit the direction twice on the pixels facing it (see estimate.cpp): a linear model is exact
   // there, while the pixels in attached shadow bias it.
   bool lit_refits = true;
+  // Per-group albedo from the colour image (EstimateLight): chromaticity cells per axis
+  // (0 = off: one uniform albedo) and light <-> albedo alternations (>= 1; the direction fits
+  // run in the last one only).
+  int albedo_groups = 32;
+  int albedo_iterations = 3;
 };
 
 struct LightEstimate {
@@ -62,8 +74,19 @@ struct LightEstimate {
 
 // Estimates from a transfer buffer and the linear grey image (width * height values, e.g. from
 // SrgbToLinearGrey). Throws LightError if the sizes differ from `transfer` or options are invalid.
+//
+// `colour` (optional, 3 sRGB bytes per pixel, the camera image; empty = one uniform albedo, the
+// paper's grey world): with options.albedo_groups > 0 the rows are grouped by the chromaticity
+// (r, g) = (R, G) / (R + G + B) of their linear colour (a albedo_groups x albedo_groups grid:
+// under white light a material's chromaticity is its albedo's) and each group gets its own
+// unknown albedo. The fit alternates (options.albedo_iterations times) between the light
+// (targets I / a_g) and the albedos a_g = sum(I p) / sum(p^2), p = T l over the group's rows
+// (groups of fewer than 16 rows keep the mean), normalised to a row-weighted mean of
+// options.albedo. Only the shading variation inside a group and between groups of the same
+// colour then carries direction information, so an object whose albedo differs from the assumed
+// one (a skin-coloured head, a red ball) no longer biases the light (docs/light.md).
 LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
-                            const EstimateOptions& options);
+                            const EstimateOptions& options, std::span<const uint8_t> colour = {});
 
 // The solver itself: rows (m x coefficient_count, row-major) and targets (m) already divided by
 // the albedo. Throws LightError for sizes that do not match or coefficient_count not in

@@ -35,10 +35,11 @@ void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte>
                             const msgs::CameraInfo& info, std::vector<float>* depth_m,
                             std::vector<float>* normals);
 
-// Linear grey intensity of an rgb8 / bgr8 / mono8 image into `grey` (width * height). Throws
-// LightError for another encoding or a size other than width x height.
+// Linear grey intensity of an rgb8 / bgr8 / mono8 image into `grey` (width * height) and, if `rgb`
+// is given, the sRGB bytes in R, G, B order (3 per pixel; cleared for mono8) for EstimateLight's
+// albedo groups. Throws LightError for another encoding or a size other than width x height.
 void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,
-                   int height, std::vector<float>* grey);
+                   int height, std::vector<float>* grey, std::vector<uint8_t>* rgb = nullptr);
 
 // Fills `out` (header left to the caller) with the white light of `e`: every channel gets the
 // same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,

@@ -54,4 +54,18 @@ AuxiliaryStorage RenderAuxiliaryViews(const raytrace::Scene& scene, const raytra
                                       const AuxiliaryViewOptions& options,
                                       raytrace::ThreadPool* pool = nullptr);
 
+// The reference for a distant-light estimator in a scene lit by near (point) lights: the light
+// averaged over the surface points the camera sees, in the camera frame. Gruber et al. 2015 fit
+// one distant light to the visible surfaces (§5.2) and measure it against a light probe at the
+// centre of the scene (§6), not at the camera; a lamp inside a room is seen from different
+// directions by different surfaces, so the only direction an image of them determines is the
+// lamp's direction as seen from those surfaces. Visible points = every `stride`-th pixel of the
+// frame's noise-free depth; per point the incident light is raytrace::LightingAt's (unshadowed).
+// sh = the mean of the per-point SH (environment + lights); the dominant light is the enabled
+// light of largest mean irradiance over the points, its direction the normalised mean of
+// irradiance x unit direction (exactly the light direction for a directional light). Falls back
+// to LightingAt at the camera if no pixel has depth. Throws LightError if stride < 1.
+raytrace::LightingGroundTruth SurfaceLightingTruth(const raytrace::Scene& scene,
+                                                   const sim::SimFrame& frame, int stride = 8);
+
 }  // namespace probeless::light

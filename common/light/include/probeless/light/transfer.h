@@ -84,6 +84,12 @@ struct TransferOptions {
   // 1 = every pixel (Ours); 4 = every 4th pixel in x and y, upsampled bicubically (OursFast).
   int subsample = 1;
   int threads = 2;  // worker threads (>= 1; the caller's thread is one of them)
+  // true: T = (A_l / pi) Y_n(n) - sum_j (1 - K_j) (omega_j . n) W_jn, i.e. the exact projection
+  // of the unoccluded clamped cosine (Ramamoorthi & Hanrahan) minus the sampled occlusion (a
+  // control variate of eq. 6 with the same limit); false: eq. 6 as printed, sum_j K_j (omega_j .
+  // n) W_jn. With N = 32 the printed sum's quadrature error of the clamped cosine alone is up to
+  // ~20 % of the shading, depending on the normal and the light direction (docs/light.md).
+  bool analytic_unoccluded = true;
 };
 
 // The dominant light for the indirect term: unit direction towards the light in the camera frame
@@ -105,6 +111,16 @@ struct TransferResult {
   // One-bounce indirect radiance (eq. 10-12), linear RGB per pixel, for albedo 1 at the pixel
   // (the renderer multiplies by its albedo); empty unless Compute got a DominantLight.
   std::vector<float> indirect;
+  // OursFast (subsample > 1): T as computed on the sparse grid, before the fill and upsampling.
+  // Sample (i, j) belongs to full-resolution pixel (min(i * sample_step + sample_step / 2,
+  // width - 1), min(j * sample_step + sample_step / 2, height - 1)); same layout as `transfer`.
+  // EstimateLight fits to these exact samples instead of interpolated pixels. Empty (and
+  // sample_step 1) for the full variant.
+  int sample_step = 1;
+  int sample_width = 0;
+  int sample_height = 0;
+  std::vector<float> samples;
+  std::vector<uint8_t> sample_valid;
 };
 
 // Computes T (and optionally R_i) per pixel. Holds the direction set, the 2x2 offset table and
@@ -131,11 +147,14 @@ class TransferComputer {
   void ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
                    int step, int out_width, int row_begin, int row_end, float* transfer,
                    uint8_t* valid, float* indirect) const;
+  // out[k] += (A_l / pi) Y_k(n) for unit n (the unoccluded transfer; analytic_unoccluded).
+  void AddClampedCosine(float x, float y, float z, float* out) const;
   TransferOptions options_;
   DirectionSet directions_;
   std::vector<float> offsets_;  // 4 x N, in [0.1, 1]
-  std::vector<float> low_transfer_, low_indirect_, row_scratch_;
-  std::vector<uint8_t> low_valid_;
+  // (A_l / pi) x the normalisation of Y_lm at index l (l + 1) + m, m >= 0 (analytic_unoccluded).
+  std::array<float, 25> clamped_{};
+  std::vector<float> low_indirect_, row_scratch_;
 };
 
 // Throws LightError("light::<where>: ...") unless `g` is usable: width, height >= 1, depth size
