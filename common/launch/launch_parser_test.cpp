@@ -191,6 +191,7 @@ TEST_F(LaunchParserTest, UnresolvedExecutablesAreKeptWhenResolutionIsOff) {
 TEST_F(LaunchParserTest, ParameterValueTexts) {
   const auto d = Load("a.yaml", R"yaml(launch:
 - arg: {name: rate, default: "15"}
+- arg: {name: none, default: ""}
 - node:
     exec: talker
     param:
@@ -202,9 +203,10 @@ TEST_F(LaunchParserTest, ParameterValueTexts) {
     - {name: substituted, value: "$(arg rate)"}
     - {name: tagged, value: !!str 5}
     - {name: dotted.name, value: x}
+    - {name: substituted_empty, value: "$(arg none)"}
 )yaml");
   const auto& p = d.nodes.at(0).parameters;
-  ASSERT_EQ(p.size(), 8u);
+  ASSERT_EQ(p.size(), 9u);
   EXPECT_EQ(p[0].value, "10");
   EXPECT_EQ(p[1].value, "'10'");
   EXPECT_EQ(p[2].value, "'it''s'");
@@ -213,6 +215,7 @@ TEST_F(LaunchParserTest, ParameterValueTexts) {
   EXPECT_EQ(p[5].value, "15");
   EXPECT_EQ(p[6].value, "'5'");
   EXPECT_EQ(p[7].name, "dotted.name");
+  EXPECT_EQ(p[8].value, "''");  // an empty substitution is the empty string, not "-p name:="
 }
 
 TEST_F(LaunchParserTest, ParameterErrors) {

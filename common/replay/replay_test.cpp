@@ -12,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <thread>
 
 #include "probeless/bus/bus.h"
@@ -496,6 +497,137 @@ TEST(PlayerTest, LockStepCoversNodesDownstreamOfThePlayedTopics) {
   for (int v; in >> v;) seen.push_back(v);
   ASSERT_EQ(seen.size(), static_cast<size_t>(kFrames));
   for (int i = 0; i < kFrames; ++i) EXPECT_EQ(seen[i], i);
+}
+
+// Lock-step at rate 1 through a node that is quicker than the frame period keeps the recorded
+// intervals (each wait re-anchors the schedule at the message just published, not at the next
+// one, which would play as fast as possible).
+TEST(PlayerTest, LockStepAtRateOneKeepsTheRecordedIntervals) {
+  constexpr int kFrames = 20;
+  const pid_t quick = fork();
+  if (quick == 0) {
+    {  // the bus objects leave the bus (and /dev/shm) before _exit
+      node::Node node(std::vector<std::string>{"quick"}, "quick");
+      bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/cam/image", {.queue_depth = 1});
+      int frames = 0;
+      node.Spin({{&in, [&](bus::Sample&&) {
+                    if (++frames == kFrames) node::RequestShutdown();
+                  }}});
+    }
+    _exit(0);
+  }
+  Recorder recorder("/cam/image", msgs::TopicTypeOf<msgs::Image>());
+  VectorSource source(kFrames, 20'000'000);
+  PlayerOptions o = Quiet();
+  o.include = {"/cam/image"};
+  o.lockstep_nodes = {"/quick"};
+  Player player(source, o);
+  const auto deadline = std::chrono::steady_clock::now() + 20s;
+  player.Run([&] { return std::chrono::steady_clock::now() < deadline; });
+  int status = 0;
+  waitpid(quick, &status, 0);
+  std::this_thread::sleep_for(50ms);
+  recorder.Stop();
+  ASSERT_EQ(recorder.mono.size(), static_cast<size_t>(kFrames));
+  std::vector<double> intervals_ms;
+  for (size_t i = 1; i < recorder.mono.size(); ++i) {
+    intervals_ms.push_back(static_cast<double>(recorder.mono[i] - recorder.mono[i - 1]) / 1e6);
+  }
+  EXPECT_NEAR(Median(intervals_ms), 20.0, 2.0);
+  EXPECT_GE(*std::min_element(intervals_ms.begin(), intervals_ms.end()), 18.0);
+}
+
+// A lock-step node that dies mid-frame (SIGKILL inside its handler, before acknowledging) does not
+// stall the player: it stops waiting for the node while it is gone and waits for it again once a
+// new instance (a respawn) is on the bus. The new instance takes 30 ms per frame against a 20 ms
+// frame period with a queue of 1, so it sees every frame from its first to the last only because
+// the player waits for it again.
+TEST(PlayerTest, LockStepSkipsANodeThatDiedAndWaitsForItsRespawn) {
+  constexpr int kFrames = 60;
+  constexpr int kDieAt = 10;
+  const fs::path result = TempDir() / "respawned.txt";
+  fs::remove(result);
+  auto node_main = [&](bool dies) {
+    node::Node node(std::vector<std::string>{"victim"}, "victim");
+    bus::Subscriber in = node.CreateSubscriber<msgs::Image>("/cam/image", {.queue_depth = 1});
+    std::vector<int> seen;
+    node.Spin({{&in, [&](bus::Sample&& s) {
+                  const int frame =
+                      static_cast<int>(msgs::ReadMessage<msgs::Image>(s.data()).payload[0]);
+                  if (dies && frame == kDieAt) raise(SIGKILL);
+                  seen.push_back(frame);
+                  std::this_thread::sleep_for(dies ? 1ms : 30ms);
+                  if (frame == kFrames - 1) node::RequestShutdown();
+                }}});
+    std::ofstream out(result);
+    for (int v : seen) out << v << "\n";
+  };
+  const pid_t first = fork();
+  if (first == 0) {
+    node_main(true);
+    _exit(0);
+  }
+  int go[2];
+  ASSERT_EQ(pipe(go), 0);
+  const pid_t second = fork();  // the "respawn": started once the first one is dead
+  if (second == 0) {
+    close(go[1]);
+    char c = 0;
+    if (read(go[0], &c, 1) != 1) _exit(1);
+    node_main(false);
+    _exit(0);
+  }
+  close(go[0]);
+  std::thread respawner([&] {
+    int status = 0;
+    waitpid(first, &status, 0);
+    std::this_thread::sleep_for(100ms);  // a respawn delay: some frames are played without it
+    const char c = 1;
+    EXPECT_EQ(write(go[1], &c, 1), 1);
+    close(go[1]);
+  });
+  VectorSource source(kFrames, 20'000'000);
+  std::mutex log_mutex;
+  std::vector<std::string> log;
+  PlayerOptions o;
+  o.log = [&](const std::string& line) {
+    std::lock_guard<std::mutex> lock(log_mutex);
+    log.push_back(line);
+  };
+  o.include = {"/cam/image"};
+  o.lockstep_nodes = {"/victim"};
+  Player player(source, o);
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  const PlayerStats stats = player.Run([&] { return std::chrono::steady_clock::now() < deadline; });
+  respawner.join();
+  EXPECT_LT(std::chrono::steady_clock::now(), deadline) << "the player stalled";
+  EXPECT_EQ(stats.published, static_cast<uint64_t>(kFrames));
+  int status = 0;
+  const auto node_deadline = std::chrono::steady_clock::now() + 10s;
+  while (waitpid(second, &status, WNOHANG) == 0) {  // it ends after the last frame
+    if (std::chrono::steady_clock::now() > node_deadline) {
+      kill(second, SIGKILL);
+      waitpid(second, &status, 0);
+      ADD_FAILURE() << "the respawned node did not get the last frame";
+      break;
+    }
+    std::this_thread::sleep_for(5ms);
+  }
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << "respawned node status " << status;
+  std::vector<int> seen;
+  std::ifstream in(result);
+  for (int v; in >> v;) seen.push_back(v);
+  ASSERT_FALSE(seen.empty()) << "the respawned node saw nothing";
+  EXPECT_GT(seen.front(), kDieAt) << "the respawn joined before the first instance died";
+  for (size_t i = 0; i < seen.size(); ++i) {
+    ASSERT_EQ(seen[i], seen.front() + static_cast<int>(i)) << "a frame was dropped";
+  }
+  EXPECT_EQ(seen.back(), kFrames - 1);
+  std::string all;
+  for (const auto& line : log) all += line + "\n";
+  EXPECT_NE(all.find("lock-step: /victim has left the bus; not waiting for it"), std::string::npos)
+      << all;
+  EXPECT_NE(all.find("lock-step: /victim is back on the bus"), std::string::npos) << all;
 }
 
 }  // namespace

@@ -548,8 +548,10 @@ class Parser {
     if (node.IsScalar()) {
       const std::string& raw = node.Scalar();
       if (internal::ContainsSubstitution(raw)) {
-        // Like ROS 2: the substituted text is typed by the node's YAML reading.
-        return Text(file, scope, node, "value");
+        // Like ROS 2: the substituted text is typed by the node's YAML reading; an empty text is
+        // the empty string (the node runtime rejects "-p name:=" without a value).
+        std::string text = Text(file, scope, node, "value");
+        return text.empty() ? "''" : text;
       }
       if (node.Tag() == "!" || node.Tag() == "tag:yaml.org,2002:str") return SingleQuote(raw);
       return raw;

@@ -278,7 +278,11 @@ struct Player::Impl {
           }
           continue;
         }
-        lock_nodes[n].gone = false;
+        if (lock_nodes[n].gone) {
+          Log("[info] player: lock-step: " + lock_nodes[n].name +
+              " is back on the bus; waiting for it again");
+          lock_nodes[n].gone = false;
+        }
         all_idle &= states[n].Idle();
       }
       if (all_idle && previous && *previous == states) break;
@@ -429,9 +433,15 @@ PlayerStats Player::Run(const std::function<bool()>& keep_going) {
       last_played = log_time;
       played += 1;
       if (!impl.lock_nodes.empty()) {
+        const int64_t published_mono = MonoNs();
         if (!impl.WaitForQuiescence(keep_going, &stats.lockstep_wait_s)) return stats;
+        // Re-anchor at the message just published: the next one keeps its recorded interval after
+        // it, or goes at once if the wait took longer (time spent waiting makes no burst later).
         std::lock_guard<std::mutex> lock(impl.mutex);
-        impl.reanchor = true;  // time spent waiting does not make later messages late
+        if (!impl.reanchor) {
+          impl.anchor_mono = published_mono;
+          impl.anchor_log = log_time;
+        }
       }
     }
     stats.passes += 1;
