@@ -147,6 +147,9 @@ int Run(int argc, char** argv) {
       options.max_message_bytes =
           msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8);
       options.slot_count = 8;
+      // The publisher appears with the first frame (its size is the camera's): keep the last two
+      // composites for subscribers that discover the topic a moment later (the recorder polls).
+      options.history = 2;
       publisher.reset();
       publisher.emplace(node.CreatePublisher<msgs::Image>("render/composite", options));
       publisher_w = width;
