@@ -241,24 +241,28 @@ TEST(DepthMerge, MatchesTheStraightforwardEquationsOnRandomInputs) {
   std::uniform_real_distribution<float> depth(0.5f, 0.8f);
   std::uniform_int_distribution<int> grey(90, 110);
   std::uniform_int_distribution<int> pct(0, 99);
-  DepthImage raw, vol;
-  GreyImage g;
-  raw.Resize(77, 41);
-  vol.Resize(77, 41);
-  g.Resize(77, 41);
-  for (size_t i = 0; i < raw.data.size(); ++i) {
-    raw.data[i] = pct(rng) < 25 ? 0.0f : depth(rng);
-    vol.data[i] = pct(rng) < 10 ? 0.0f : (pct(rng) < 50 ? raw.data[i] + 0.01f : depth(rng));
-    g.data[i] = static_cast<uint8_t>(grey(rng));
-  }
-  for (MergeOptions o : {MergeOptions{}, SmallWindows()}) {
-    ThreadPool pool(2);
-    MergedDepth got;
-    MergeDepth(raw, vol, g, o, got, &pool);
-    const MergedDepth want = Reference(raw, vol, g, o);
-    EXPECT_EQ(got.merged.data, want.merged.data);
-    EXPECT_EQ(got.smoothed.data, want.smoothed.data);
-    EXPECT_EQ(got.denoised.data, want.denoised.data);
+  // Few and many holes: every sample count 0..25 of the vectorised medians occurs.
+  for (const int holes_pct : {25, 85}) {
+    DepthImage raw, vol;
+    GreyImage g;
+    raw.Resize(77, 41);
+    vol.Resize(77, 41);
+    g.Resize(77, 41);
+    for (size_t i = 0; i < raw.data.size(); ++i) {
+      raw.data[i] = pct(rng) < holes_pct ? 0.0f : depth(rng);
+      vol.data[i] =
+          pct(rng) < holes_pct / 2 ? 0.0f : (pct(rng) < 50 ? raw.data[i] + 0.01f : depth(rng));
+      g.data[i] = static_cast<uint8_t>(grey(rng));
+    }
+    for (MergeOptions o : {MergeOptions{}, SmallWindows()}) {
+      ThreadPool pool(2);
+      MergedDepth got;
+      MergeDepth(raw, vol, g, o, got, &pool);
+      const MergedDepth want = Reference(raw, vol, g, o);
+      EXPECT_EQ(got.merged.data, want.merged.data);
+      EXPECT_EQ(got.smoothed.data, want.smoothed.data);
+      EXPECT_EQ(got.denoised.data, want.denoised.data);
+    }
   }
 }
 

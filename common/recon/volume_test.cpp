@@ -85,6 +85,48 @@ TEST(TsdfVolume, SphereFromSeveralViewsWithinAVoxel) {
   EXPECT_TRUE(std::isnan(volume.TsdfAt({5, 5, 5})));
 }
 
+// Rays that pass a small near object traverse empty bricks and coarse cells (4^3 bricks) up to the
+// far wall behind it: skipping must neither stop early nor jump over the wall; the resolution (200,
+// i.e. 25 bricks per side) leaves a partial coarse cell at the volume's far faces.
+TEST(TsdfVolume, EmptySpaceSkippingReachesSurfacesBehindEmptyCells) {
+  Scene scene;
+  scene.planes.push_back({Normalized({0, 0, -1}), -2.1f});  // far wall z = 2.1
+  scene.spheres.push_back({{0.02f, -0.03f, 0.6f}, 0.06f});  // small and near
+  const Intrinsics k = TestIntrinsics();
+  VolumeOptions options;
+  options.resolution = 200;
+  options.size_m = 3.0f;  // 1.5 cm voxels; the whole view of the wall lies inside
+  options.origin = {-1.5f, -1.5f, 0.2f};
+  TsdfVolume volume(options);
+  ThreadPool pool(2);
+  const Pose pose = PoseFrom(0, 0.03, 0, -0.06, 0, 0);
+  const DepthImage reference = scene.Render(pose, k);
+  for (int i = 0; i < 2; ++i) volume.Integrate(reference, k, pose, &pool);
+  GeometryView view;
+  volume.Raycast(pose, k, view, &pool);
+  const Compare c = CompareDepth(reference, view.depth);
+  EXPECT_GT(c.both, 0.97);
+  EXPECT_LT(c.max_err, volume.voxel_size());
+  // The wall around the sphere (the same 8 x 8 range-image tiles, so these rays start in front of
+  // the sphere and cross the empty space behind it), away from the silhouette's voxel-sized
+  // fringe, is found at its depth.
+  auto sphere_within = [&](int x, int y, int r) {
+    for (int yy = std::max(0, y - r); yy <= std::min(k.height - 1, y + r); ++yy)
+      for (int xx = std::max(0, x - r); xx <= std::min(k.width - 1, x + r); ++xx)
+        if (reference.At(xx, yy) > 0 && reference.At(xx, yy) < 1.0f) return true;
+    return false;
+  };
+  int checked = 0;
+  for (int y = 0; y < k.height; ++y)
+    for (int x = 0; x < k.width; ++x) {
+      if (reference.At(x, y) < 2.0f || !sphere_within(x, y, 16) || sphere_within(x, y, 8)) continue;
+      ++checked;
+      ASSERT_NEAR(view.depth.At(x, y), reference.At(x, y), volume.voxel_size())
+          << "pixel " << x << "," << y;
+    }
+  EXPECT_GT(checked, 500);
+}
+
 TEST(TsdfVolume, IntegrationIsDeterministicAcrossThreadCounts) {
   const Scene scene = CornerScene();
   const Intrinsics k = TestIntrinsics();

@@ -1,23 +1,30 @@
 // fusion_eval: measures the reconstruction pipeline.
 //
 //   fusion_eval --sevenscenes DIR [--frames A-B] [--peer opencv] [--peer-frames N] --json OUT
-//               [--mesh OUT.ply] [--threads N] [--no-merge] [--verbose]
+//               [--mesh OUT.ply] [--poses OUT.txt] [--threads N] [--no-merge] [--verbose]
+//               [--volume-size M --volume-origin X,Y,Z [--volume-resolution N]]
 //   fusion_eval --sim SCENARIO [--frames A-B] --json OUT [--volume-size M] [--volume-origin X,Y,Z]
 //
 // 7-Scenes: frames are decoded up front (not timed), then tracked, integrated, raycast and merged;
-// JSON keys frames, ate_rmse_m (translation RMSE after aligning the first pose), ate_max_m,
-// tracking_lost, ms_per_frame_median (all stages incl. preprocessing), ms_preprocess_median,
-// ms_icp_median, ms_integrate_median, ms_raycast_median, ms_merge_median, threads; with
-// --peer opencv the first --peer-frames (100) frames also run through OpenCV 4.6's kinfu TSDF
-// volume (cv::kinfu::makeVolume, same 256^3 / 2 m / truncation / max weight) and
-// cv::rgbd::ICPOdometry (frame to frame, same 3-level pyramid and iterations), adding
-// peer_frames, peer_ms_per_frame_median, peer_ate_rmse_m, speedup_median. 7-Scenes colour is not
-// registered to depth: the merge uses it unregistered as intensity guidance (documented
-// approximation); tracking uses depth only. Tuning knobs for experiments (environment):
-// FUSION_EVAL_ICP=a,b,c (iterations), FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m),
-// FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m), FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE
-// (deg), FUSION_EVAL_DEPTH_SCALE (multiplies the depth). --volume-size/--volume-origin and
-// --min-inliers override the volume and the tracking-quality threshold.
+// JSON keys frames, ate_rmse_m (translation RMSE after aligning the first pose: accumulated
+// drift), ate_max_m, ate_aligned_rmse_m / ate_aligned_max_m (the TUM RGB-D benchmark's ATE: after
+// the least-squares rigid alignment of all positions, Horn 1987), tracking_lost,
+// ms_per_frame_median (wall, all stages incl. preprocessing), ms_<stage>_median (wall) and
+// cpu_ms_<stage>_median (process CPU time, both threads) for preprocess, icp, integrate, raycast
+// and merge, cpu_ms_per_frame_median, threads, volume_size_m, volume_resolution,
+// volume_origin_{x,y,z} (the volume used, also printed); --poses writes one line per frame:
+// index, estimated and ground-truth 3x4 [R | t]. With --peer opencv the first --peer-frames
+// (100) frames also run through OpenCV 4.6's kinfu TSDF volume (cv::kinfu::makeVolume, same
+// volume / truncation / max weight) and cv::rgbd::ICPOdometry (frame to frame, same 3-level
+// pyramid and iterations), adding peer_frames, peer_ms_per_frame_median, peer_ate_rmse_m,
+// peer_ate_aligned_rmse_m, speedup_median. 7-Scenes colour is not registered to depth: the merge
+// uses it unregistered as intensity guidance (documented approximation); tracking uses depth
+// only. The default volume is the library's (256^3 over 2 m, see recon::VolumeOptions).
+// Tuning knobs for experiments (environment): FUSION_EVAL_ICP=a,b,c (iterations),
+// FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m), FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m),
+// FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_DEPTH_SCALE (multiplies the
+// depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy).
+// --min-inliers overrides the tracking-quality threshold.
 //
 // Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
 // truth poses, and reports per pass the mean absolute depth error and hole fraction of raw depth
@@ -26,6 +33,7 @@
 #include <time.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -96,6 +104,83 @@ Ate ComputeAte(const std::vector<recon::Pose>& est, const std::vector<recon::Pos
   return a;
 }
 
+// Eigenvector of the largest eigenvalue of a symmetric 4x4 matrix (cyclic Jacobi rotations).
+std::array<double, 4> LargestEigenvector(double a[4][4]) {
+  double v[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+  for (int sweep = 0; sweep < 50; ++sweep) {
+    double off = 0;
+    for (int p = 0; p < 4; ++p)
+      for (int q = p + 1; q < 4; ++q) off += a[p][q] * a[p][q];
+    if (off < 1e-30) break;
+    for (int p = 0; p < 4; ++p) {
+      for (int q = p + 1; q < 4; ++q) {
+        if (std::fabs(a[p][q]) < 1e-300) continue;
+        const double theta = (a[q][q] - a[p][p]) / (2 * a[p][q]);
+        const double t = (theta >= 0 ? 1 : -1) / (std::fabs(theta) + std::sqrt(theta * theta + 1));
+        const double c = 1 / std::sqrt(t * t + 1), s = t * c;
+        for (int k = 0; k < 4; ++k) {  // A <- A J (columns p, q)
+          const double akp = a[k][p], akq = a[k][q];
+          a[k][p] = c * akp - s * akq;
+          a[k][q] = s * akp + c * akq;
+        }
+        for (int k = 0; k < 4; ++k) {  // A <- J^T A (rows p, q)
+          const double apk = a[p][k], aqk = a[q][k];
+          a[p][k] = c * apk - s * aqk;
+          a[q][k] = s * apk + c * aqk;
+        }
+        for (int k = 0; k < 4; ++k) {
+          const double vkp = v[k][p], vkq = v[k][q];
+          v[k][p] = c * vkp - s * vkq;
+          v[k][q] = s * vkp + c * vkq;
+        }
+      }
+    }
+  }
+  int best = 0;
+  for (int i = 1; i < 4; ++i)
+    if (a[i][i] > a[best][best]) best = i;
+  return {v[0][best], v[1][best], v[2][best], v[3][best]};
+}
+
+// ATE as defined by the TUM RGB-D benchmark (Sturm et al. 2012): translation RMSE after the
+// rigid transform (no scale) that best aligns the estimated positions with the ground truth in
+// the least-squares sense (Horn 1987, closed form with unit quaternions).
+Ate ComputeAteAligned(const std::vector<recon::Pose>& est, const std::vector<recon::Pose>& truth) {
+  Ate a;
+  const size_t n = est.size();
+  if (n == 0) return a;
+  double me[3] = {}, mg[3] = {};
+  for (size_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) me[c] += est[i].t[c] / n, mg[c] += truth[i].t[c] / n;
+  double s[3][3] = {};  // sum (e - me)(g - mg)^T
+  for (size_t i = 0; i < n; ++i)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) s[r][c] += (est[i].t[r] - me[r]) * (truth[i].t[c] - mg[c]);
+  double m[4][4] = {
+      {s[0][0] + s[1][1] + s[2][2], s[1][2] - s[2][1], s[2][0] - s[0][2], s[0][1] - s[1][0]},
+      {s[1][2] - s[2][1], s[0][0] - s[1][1] - s[2][2], s[0][1] + s[1][0], s[2][0] + s[0][2]},
+      {s[2][0] - s[0][2], s[0][1] + s[1][0], -s[0][0] + s[1][1] - s[2][2], s[1][2] + s[2][1]},
+      {s[0][1] - s[1][0], s[2][0] + s[0][2], s[1][2] + s[2][1], -s[0][0] - s[1][1] + s[2][2]}};
+  const std::array<double, 4> q = LargestEigenvector(m);
+  const double w = q[0], x = q[1], y = q[2], z = q[3];
+  const double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                          {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                          {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+  double sum2 = 0;
+  for (size_t i = 0; i < n; ++i) {
+    double e2 = 0;
+    for (int row = 0; row < 3; ++row) {
+      double p = mg[row];
+      for (int c = 0; c < 3; ++c) p += r[row][c] * (est[i].t[c] - me[c]);
+      e2 += (p - truth[i].t[row]) * (p - truth[i].t[row]);
+    }
+    sum2 += e2;
+    a.max = std::max(a.max, std::sqrt(e2));
+  }
+  a.rmse = std::sqrt(sum2 / n);
+  return a;
+}
+
 std::vector<Frame> LoadSevenScenes(const std::string& dir, int first, int last,
                                    recon::Intrinsics* k) {
   dataset::DatasetOptions options;
@@ -139,6 +224,7 @@ struct PeerResult {
   double ms_median = 0;
   double cpu_ms_median = 0;
   Ate ate;
+  Ate ate_aligned;
 };
 
 // OpenCV 4.6: kinfu TSDF volume + rgbd::ICPOdometry, frame to frame.
@@ -196,6 +282,7 @@ PeerResult RunOpenCvPeer(const std::vector<Frame>& frames, const recon::Intrinsi
   r.ms_median = Median(ms);
   r.cpu_ms_median = Median(cpu);
   r.ate = ComputeAte(est, truth);
+  r.ate_aligned = ComputeAteAligned(est, truth);
   return r;
 }
 
@@ -228,9 +315,26 @@ void WriteJson(const std::string& path, const std::string& json) {
   std::printf("%s", json.c_str());
 }
 
+// One line per frame: index, the estimate's 3x4 [R | t] and the ground truth's (row-major).
+void WritePoses(const std::string& path, const std::vector<recon::Pose>& est,
+                const std::vector<recon::Pose>& truth) {
+  std::ofstream f(path);
+  if (!f) throw UsageError("cannot write '" + path + "'");
+  f.precision(9);
+  for (size_t i = 0; i < est.size(); ++i) {
+    f << i;
+    for (const recon::Pose* p : {&est[i], &truth[i]})
+      for (int r = 0; r < 3; ++r)
+        f << ' ' << p->r[r * 3] << ' ' << p->r[r * 3 + 1] << ' ' << p->r[r * 3 + 2] << ' '
+          << p->t[r];
+    f << '\n';
+  }
+}
+
 int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer, int peer_frames,
                    const std::string& json, const std::string& mesh, int threads, bool merge,
-                   bool verbose, const recon::VolumeOptions* volume, float min_inliers) {
+                   bool verbose, const recon::VolumeOptions* volume, float min_inliers,
+                   const std::string& poses_out) {
   recon::Intrinsics k;
   std::vector<Frame> frames = LoadSevenScenes(dir, range.first, range.second, &k);
   if (const char* sc = std::getenv("FUSION_EVAL_DEPTH_SCALE")) {
@@ -239,6 +343,13 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       for (float& d : fr.depth.data) d *= f;
   }
   if (frames.empty()) throw UsageError("no frames in '" + dir + "'");
+  if (const char* fo = std::getenv("FUSION_EVAL_FOCAL")) k.fx = k.fy = std::atof(fo);
+  if (const char* dm = std::getenv("FUSION_EVAL_DEPTH_MAX")) {
+    const float m = std::atof(dm);
+    for (Frame& fr : frames)
+      for (float& d : fr.depth.data)
+        if (d > m) d = 0;
+  }
   recon::FusionOptions options;
   options.threads = threads;
   options.merge_enabled = merge;
@@ -258,7 +369,14 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   if (const char* tr = std::getenv("FUSION_EVAL_TRUNC"))
     options.volume.truncation_m = std::atof(tr);
   recon::FusionPipeline pipeline(options);
+  const recon::VolumeOptions& vol = pipeline.options().volume;
+  std::fprintf(stderr,
+               "fusion_eval: %zu frames, volume %d^3 over %.2f m (%.1f mm voxels) at origin "
+               "(%.2f, %.2f, %.2f) of the first camera, truncation %.3f m\n",
+               frames.size(), vol.resolution, vol.size_m, 1000.0 * vol.size_m / vol.resolution,
+               vol.origin.x, vol.origin.y, vol.origin.z, vol.truncation_m);
   std::vector<double> total, pre, icp, integ, ray, mrg, cpu;
+  std::vector<double> pre_cpu, icp_cpu, integ_cpu, ray_cpu, mrg_cpu;
   std::vector<recon::Pose> est, truth;
   int lost = 0;
   for (const Frame& f : frames) {
@@ -293,14 +411,23 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
     integ.push_back(r.timings.integrate_ms);
     ray.push_back(r.timings.raycast_ms);
     mrg.push_back(r.timings.merge_ms);
+    pre_cpu.push_back(r.timings.preprocess_cpu_ms);
+    icp_cpu.push_back(r.timings.icp_cpu_ms);
+    integ_cpu.push_back(r.timings.integrate_cpu_ms);
+    ray_cpu.push_back(r.timings.raycast_cpu_ms);
+    mrg_cpu.push_back(r.timings.merge_cpu_ms);
     est.push_back(r.camera_to_world);
     truth.push_back(f.truth);
   }
   const Ate ate = ComputeAte(est, truth);
+  const Ate ate_aligned = ComputeAteAligned(est, truth);
+  if (!poses_out.empty()) WritePoses(poses_out, est, truth);
   std::vector<std::pair<std::string, double>> fields = {
       {"frames", static_cast<double>(frames.size())},
       {"ate_rmse_m", ate.rmse},
       {"ate_max_m", ate.max},
+      {"ate_aligned_rmse_m", ate_aligned.rmse},
+      {"ate_aligned_max_m", ate_aligned.max},
       {"tracking_lost", static_cast<double>(lost)},
       {"ms_per_frame_median", Median(total)},
       {"ms_preprocess_median", Median(pre)},
@@ -312,6 +439,16 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       // CPU time of the process per frame (all threads): load-independent; on an idle machine
       // the wall time is about this / threads.
       {"cpu_ms_per_frame_median", Median(cpu)},
+      {"cpu_ms_preprocess_median", Median(pre_cpu)},
+      {"cpu_ms_icp_median", Median(icp_cpu)},
+      {"cpu_ms_integrate_median", Median(integ_cpu)},
+      {"cpu_ms_raycast_median", Median(ray_cpu)},
+      {"cpu_ms_merge_median", Median(mrg_cpu)},
+      {"volume_size_m", vol.size_m},
+      {"volume_resolution", static_cast<double>(vol.resolution)},
+      {"volume_origin_x", vol.origin.x},
+      {"volume_origin_y", vol.origin.y},
+      {"volume_origin_z", vol.origin.z},
   };
   if (!mesh.empty()) {
     const recon::Mesh m = pipeline.volume().ExtractMesh(pipeline.pool());
@@ -332,6 +469,13 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
     fields.push_back({"peer_seconds", seconds});
     fields.push_back({"peer_ms_per_frame_median", p.ms_median});
     fields.push_back({"peer_ate_rmse_m", p.ate.rmse});
+    fields.push_back({"peer_ate_aligned_rmse_m", p.ate_aligned.rmse});
+    // Ours on the peer's frames.
+    const std::vector<recon::Pose> est_same(est.begin(), est.begin() + subset.size());
+    const std::vector<recon::Pose> truth_same(truth.begin(), truth.begin() + subset.size());
+    fields.push_back({"ate_rmse_m_same_frames", ComputeAte(est_same, truth_same).rmse});
+    fields.push_back(
+        {"ate_aligned_rmse_m_same_frames", ComputeAteAligned(est_same, truth_same).rmse});
     fields.push_back({"peer_cpu_ms_per_frame_median", p.cpu_ms_median});
     std::vector<double> ours_cpu(cpu.begin(), cpu.begin() + subset.size());
     fields.push_back({"cpu_speedup_median", p.cpu_ms_median / std::max(1e-9, Median(ours_cpu))});
@@ -448,12 +592,13 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
 }
 
 int Run(int argc, char** argv) {
-  std::string sevenscenes, sim_path, json, mesh, peer;
+  std::string sevenscenes, sim_path, json, mesh, peer, poses_out;
   std::pair<int, int> range{0, -1};
   int peer_frames = 100, threads = 2;
   bool merge = true, verbose = false, volume_given = false;
   float min_inliers = -1;
   float volume_size = 5.0f;
+  int volume_resolution = 256;
   recon::Vec3f origin{-2.5f, -0.05f, -2.5f};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -475,6 +620,8 @@ int Run(int argc, char** argv) {
       json = value();
     else if (a == "--mesh")
       mesh = value();
+    else if (a == "--poses")
+      poses_out = value();
     else if (a == "--threads")
       threads = std::stoi(value());
     else if (a == "--no-merge")
@@ -483,6 +630,8 @@ int Run(int argc, char** argv) {
       verbose = true;
     else if (a == "--volume-size")
       volume_size = std::stof(value()), volume_given = true;
+    else if (a == "--volume-resolution")
+      volume_resolution = std::stoi(value()), volume_given = true;
     else if (a == "--min-inliers")
       min_inliers = std::stof(value());
     else if (a == "--volume-origin") {
@@ -503,10 +652,12 @@ int Run(int argc, char** argv) {
   if (volume_given) {
     seven_volume.size_m = volume_size;
     seven_volume.origin = origin;
+    seven_volume.resolution = volume_resolution;
   }
   if (!sevenscenes.empty()) {
     return RunSevenScenes(sevenscenes, range, !peer.empty(), peer_frames, json, mesh, threads,
-                          merge, verbose, volume_given ? &seven_volume : nullptr, min_inliers);
+                          merge, verbose, volume_given ? &seven_volume : nullptr, min_inliers,
+                          poses_out);
   }
   return RunSim(sim_path, range, json, volume_size, origin, threads);
 }

@@ -1,11 +1,16 @@
 #include "probeless/recon/depth_merge.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <utility>
 #include <vector>
+
+#ifdef __AVX__
+#include <immintrin.h>
+#endif
 
 namespace probeless::recon {
 
@@ -57,19 +62,9 @@ constexpr int kLanes = 8;
 typedef float Lanes __attribute__((vector_size(kLanes * sizeof(float))));
 class LaneMedian {
  public:
-  explicit LaneMedian(int slots) : slots_(slots), middle_(slots / 2 - 1), v_(slots) {
-    // Keep only the compare-exchanges the middle slot depends on (walking the network backwards).
-    const std::vector<std::pair<int, int>> all = BatcherNetwork(slots);
-    std::vector<bool> needed(slots, false);
-    needed[middle_] = true;
-    for (auto it = all.rbegin(); it != all.rend(); ++it) {
-      if (needed[it->first] || needed[it->second]) {
-        needed[it->first] = needed[it->second] = true;
-        pairs_.push_back(*it);
-      }
-    }
-    std::reverse(pairs_.begin(), pairs_.end());
-  }
+  // slots: 16 or 32.
+  explicit LaneMedian(int slots)
+      : slots_(slots), middle_(slots / 2 - 1), pairs_(Network(slots)), v_(slots) {}
   void Set(int lane, int slot, float value) { v_[slot][lane] = value; }
   // Pads lane `lane` holding n >= 1 samples.
   void Pad(int lane, int n) {
@@ -90,15 +85,37 @@ class LaneMedian {
   float Median(int lane) const { return v_[middle_][lane]; }
 
  private:
+  // The compare-exchanges the middle slot depends on (walking the network backwards), built
+  // once per slot count.
+  static std::vector<std::pair<int, int>> Pruned(int slots) {
+    const int middle = slots / 2 - 1;
+    const std::vector<std::pair<int, int>> all = BatcherNetwork(slots);
+    std::vector<bool> needed(slots, false);
+    needed[middle] = true;
+    std::vector<std::pair<int, int>> pairs;
+    for (auto it = all.rbegin(); it != all.rend(); ++it) {
+      if (needed[it->first] || needed[it->second]) {
+        needed[it->first] = needed[it->second] = true;
+        pairs.push_back(*it);
+      }
+    }
+    std::reverse(pairs.begin(), pairs.end());
+    return pairs;
+  }
+  static const std::vector<std::pair<int, int>>& Network(int slots) {
+    static const std::vector<std::pair<int, int>> k16 = Pruned(16), k32 = Pruned(32);
+    return slots == 16 ? k16 : k32;
+  }
+
   int slots_;
   int middle_;
-  std::vector<std::pair<int, int>> pairs_;
+  const std::vector<std::pair<int, int>>& pairs_;
   std::vector<Lanes> v_;
 };
 
 // 8 pixels of one row at once (GCC vector extensions; AVX2 when enabled): every window sample
-// goes to a fixed slot, missing or excluded samples become +inf, a full sorting network sorts the
-// slots per lane and each lane's lower median is slot (n - 1) / 2 of its n valid samples.
+// goes to a fixed slot, missing or excluded samples become +inf or -inf so that each lane's lower
+// median lands in the middle slot, which a selection network computes (see MedianBatch).
 typedef float F8 __attribute__((vector_size(32)));
 typedef int I8 __attribute__((vector_size(32)));
 
@@ -107,31 +124,82 @@ inline F8 LoadF8(const float* p) {
   std::memcpy(&v, p, sizeof(v));
   return v;
 }
+typedef uint8_t B8 __attribute__((vector_size(8)));
 inline I8 LoadU8(const uint8_t* p) {
-  I8 v;
-  for (int l = 0; l < 8; ++l) v[l] = p[l];
-  return v;
+  B8 v;
+  std::memcpy(&v, p, sizeof(v));  // one 8-byte load, widened in registers (vpmovzxbd)
+  return __builtin_convertvector(v, I8);
 }
 
-// A sorting network for `samples` values: Batcher's for the next power of two without the
-// compare-exchanges that touch slots >= samples (those hold +inf and never move).
-std::vector<std::pair<int, int>> SortingNetwork(int samples) {
+// A selection network for the middle slot (samples - 1) / 2 of `samples` (odd, <= 32) values,
+// built at compile time: Batcher's network for the next power of two without the
+// compare-exchanges that touch slots >= samples (those would hold +inf and never move), then
+// only the compare-exchanges the middle slot depends on (walking the network backwards).
+struct StaticNetwork {
+  std::array<std::pair<int, int>, 256> pairs{};
+  int size = 0;
+};
+constexpr StaticNetwork MakeMiddleNetwork(int samples) {
   int n = 1;
   while (n < samples) n <<= 1;
-  std::vector<std::pair<int, int>> pairs;
-  for (const auto& p : BatcherNetwork(n))
-    if (p.second < samples) pairs.push_back(p);
-  return pairs;
+  std::array<std::pair<int, int>, 256> all{};
+  int count = 0;
+  for (int p = 1; p < n; p <<= 1)
+    for (int k = p; k >= 1; k >>= 1)
+      for (int j = k % p; j + k < n; j += 2 * k)
+        for (int i = 0; i < std::min(k, n - j - k); ++i)
+          if ((i + j) / (2 * p) == (i + j + k) / (2 * p) && i + j + k < samples) {
+            all[count++] = {i + j, i + j + k};
+          }
+  bool needed[32] = {};
+  needed[(samples - 1) / 2] = true;
+  std::array<std::pair<int, int>, 256> backwards{};
+  int kept = 0;
+  for (int c = count - 1; c >= 0; --c) {
+    if (needed[all[c].first] || needed[all[c].second]) {
+      needed[all[c].first] = needed[all[c].second] = true;
+      backwards[kept++] = all[c];
+    }
+  }
+  StaticNetwork out;
+  for (int c = 0; c < kept; ++c) out.pairs[c] = backwards[kept - 1 - c];
+  out.size = kept;
+  return out;
+}
+template <int Samples>
+inline constexpr StaticNetwork kMiddleNetwork = MakeMiddleNetwork(Samples);
+
+// The network fully unrolled, so the slots stay in registers as far as possible.
+template <int Samples, size_t... I>
+inline void RunMiddleNetwork([[maybe_unused]] F8* slots, std::index_sequence<I...>) {
+  [[maybe_unused]] auto exchange = [](F8& a, F8& b) {
+#ifdef __AVX__
+    // vminps(a, b) = a < b ? a : b and vmaxps(b, a) = b > a ? b : a exactly (no NaNs here).
+    const F8 lo = _mm256_min_ps(a, b);
+    const F8 hi = _mm256_max_ps(b, a);
+#else
+    const F8 lo = a < b ? a : b;
+    const F8 hi = b > a ? b : a;
+#endif
+    a = lo;
+    b = hi;
+  };
+  (exchange(slots[kMiddleNetwork<Samples>.pairs[I].first],
+            slots[kMiddleNetwork<Samples>.pairs[I].second]),
+   ...);
 }
 
-// Medians over the window `win` of `depth` at pixels x0..x0+7 of row y, with the joint intensity
-// test |I(p) - I(q)| < lambda_i when `intensity` is not null. Needs x0 - win.half >= 0 and
-// x0 + 7 + win.half < width, and at most Slots window samples.
-template <int Slots>
+// Medians over the window `win` (Samples = its sample count, odd) of `depth` at pixels
+// x0..x0+7 of row y, with the joint intensity test |I(p) - I(q)| < lambda_i when `intensity` is
+// not null. Needs x0 - win.half >= 0 and x0 + 7 + win.half < width. The lower median of a lane's
+// n valid samples is moved to the fixed middle slot m = (Samples - 1) / 2 by turning the first
+// m - floor((n - 1) / 2) missing samples into -inf and the rest into +inf (n + that <= Samples
+// for an odd count), so one selection network serves every n and the result is read without a
+// per-lane index.
+template <int Samples>
 void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lambda_i,
-                 const Window& win, const std::vector<std::pair<int, int>>& network, int x0, int y,
-                 float* out) {
-  F8 slots[Slots];
+                 const Window& win, int x0, int y, float* out) {
+  F8 slots[Samples];
   I8 count = {};
   const F8 inf = F8{} + 1e30f;
   const F8 zero = {};
@@ -159,14 +227,87 @@ void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lamb
       count -= valid;
     }
   }
-  for (; s < Slots; ++s) slots[s] = inf;
-  for (const auto& [a, b] : network) {
-    const F8 x = slots[a], z = slots[b];
-    const I8 less = x < z;
-    slots[a] = less ? x : z;
-    slots[b] = less ? z : x;
+  constexpr int kMiddle = (Samples - 1) / 2;
+  I8 low = kMiddle - ((count - 1) >> 1);  // missing samples still to turn into -inf
+  const F8 minus_inf = F8{} - 1e30f;
+  for (int i = 0; i < Samples; ++i) {
+    const I8 take = (slots[i] == inf) & (low > 0);
+    slots[i] = take ? minus_inf : slots[i];
+    low += take;  // take is -1 where taken
   }
-  for (int l = 0; l < 8; ++l) out[l] = count[l] > 0 ? slots[(count[l] - 1) / 2][l] : 0.0f;
+  RunMiddleNetwork<Samples>(slots, std::make_index_sequence<kMiddleNetwork<Samples>.size>{});
+  const F8 result = count > 0 ? slots[kMiddle] : zero;
+  std::memcpy(out, &result, sizeof(result));
+}
+
+// MedianBatch for the window's sample count (1, 9 or 25: windows are 1x1, 3x3 or 5x5 samples).
+void MedianBatchFor(const DepthImage& depth, const GreyImage* intensity, float lambda_i,
+                    const Window& win, int x0, int y, float* out) {
+  const int per_side = (2 * win.half) / win.stride + 1;
+  switch (per_side) {
+    case 1:
+      MedianBatch<1>(depth, intensity, lambda_i, win, x0, y, out);
+      break;
+    case 3:
+      MedianBatch<9>(depth, intensity, lambda_i, win, x0, y, out);
+      break;
+    default:
+      MedianBatch<25>(depth, intensity, lambda_i, win, x0, y, out);
+      break;
+  }
+}
+
+// D' (eq. 1-3) at pixels x0..x0+7 of row y (same conditions on x0 as MedianBatch; Samples = the
+// window's sample count). The window's medians are only computed when a lane is a hole.
+template <int Samples>
+F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
+              float lambda_i, float lambda_d, const Window& win, int x0, int y) {
+  const F8 zero = {};
+  const F8 ld = F8{} + lambda_d;
+  const F8 dc = LoadF8(&raw.At(x0, y)), dv = LoadF8(&volume.At(x0, y));
+  const I8 dc_valid = dc > zero, dv_valid = dv > zero;
+  const F8 diff = dc - dv;
+  const F8 valid_result = (dv_valid & (diff <= ld) & (-diff <= ld)) ? dv : dc;
+  bool any_hole = false;
+  for (int l = 0; l < 8; ++l) any_hole |= dc_valid[l] == 0;
+  if (!any_hole) return valid_result;
+  F8 slots[Samples];
+  I8 n_i = {}, n_d = {};
+  const F8 inf = F8{} + 1e30f;
+  const F8 li = F8{} + lambda_i;
+  const I8 ip = LoadU8(&intensity.At(x0, y));
+  int s = 0;
+  for (int dy = -win.half; dy <= win.half; dy += win.stride) {
+    const int yy = y + dy;
+    if (yy < 0 || yy >= raw.height) {
+      for (int dx = -win.half; dx <= win.half; dx += win.stride) slots[s++] = inf;
+      continue;
+    }
+    const float* drow = &raw.At(0, yy);
+    const float* vrow = &volume.At(0, yy);
+    const uint8_t* irow = &intensity.At(0, yy);
+    for (int dx = -win.half; dx <= win.half; dx += win.stride) {
+      const F8 d = LoadF8(drow + x0 + dx), v = LoadF8(vrow + x0 + dx);
+      I8 idiff = ip - LoadU8(irow + x0 + dx);
+      idiff = idiff < 0 ? -idiff : idiff;
+      const I8 in_i = (d > zero) & (__builtin_convertvector(idiff, F8) < li);  // eq. 1
+      const F8 dd = d - v;
+      n_d -= in_i & (v > zero) & (dd < ld) & (-dd < ld);  // eq. 2
+      slots[s++] = in_i ? d : inf;
+      n_i -= in_i;
+    }
+  }
+  constexpr int kMiddle = (Samples - 1) / 2;
+  I8 low = kMiddle - ((n_i - 1) >> 1);  // as in MedianBatch
+  const F8 minus_inf = F8{} - 1e30f;
+  for (int i = 0; i < Samples; ++i) {
+    const I8 take = (slots[i] == inf) & (low > 0);
+    slots[i] = take ? minus_inf : slots[i];
+    low += take;
+  }
+  RunMiddleNetwork<Samples>(slots, std::make_index_sequence<kMiddleNetwork<Samples>.size>{});
+  const F8 hole_result = n_i == 0 ? zero : ((dv_valid & (2 * n_d >= n_i)) ? dv : slots[kMiddle]);
+  return dc_valid ? valid_result : hole_result;
 }
 
 template <class Fn>
@@ -219,9 +360,24 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
   {
     const Window win = WindowFor(options.merge_k);
     const float li = options.merge_lambda_i;
+    const int per_side = (2 * win.half) / win.stride + 1;
     ForRows(pool, h, [&](int y) {
       float samples[121];
       for (int x = 0; x < w; ++x) {
+        if (x % kLanes == 0 && x - win.half >= 0 && x + kLanes - 1 + win.half < w) {
+          // 8 interior pixels at once (bit-identical to the scalar equations below).
+          F8 r;
+          if (per_side == 5) {
+            r = MergeBatch<25>(raw, volume, intensity, li, ld, win, x, y);
+          } else if (per_side == 3) {
+            r = MergeBatch<9>(raw, volume, intensity, li, ld, win, x, y);
+          } else {
+            r = MergeBatch<1>(raw, volume, intensity, li, ld, win, x, y);
+          }
+          std::memcpy(&out.merged.At(x, y), &r, sizeof(r));
+          x += kLanes - 1;
+          continue;
+        }
         const float dc = raw.At(x, y), dv = volume.At(x, y);
         float result;
         if (dc > 0) {
@@ -259,15 +415,13 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
   {
     const Window win = WindowFor(options.smooth_k);
     const float li = options.smooth_lambda_i;
-    const int per_side = (2 * win.half) / win.stride + 1;
-    const std::vector<std::pair<int, int>> network = SortingNetwork(per_side * per_side);
     ForRows(pool, h, [&](int y) {
       LaneMedian median(32);
       int counts[kLanes];
       for (int x0 = 0; x0 < w; x0 += kLanes) {
         const int lanes = std::min(kLanes, w - x0);
         if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
-          MedianBatch<32>(out.merged, &intensity, li, win, network, x0, y, &out.smoothed.At(x0, y));
+          MedianBatchFor(out.merged, &intensity, li, win, x0, y, &out.smoothed.At(x0, y));
           continue;
         }
         for (int lane = 0; lane < kLanes; ++lane) {
@@ -304,18 +458,13 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
     const Window win = WindowFor(options.denoise_k);
     const int per_side = (2 * win.half) / win.stride + 1;
     const int slots = per_side * per_side <= 9 ? 16 : 32;
-    const std::vector<std::pair<int, int>> network = SortingNetwork(per_side * per_side);
     ForRows(pool, h, [&](int y) {
       LaneMedian median(slots);
       int counts[kLanes];
       for (int x0 = 0; x0 < w; x0 += kLanes) {
         const int lanes = std::min(kLanes, w - x0);
         if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
-          if (slots == 16) {
-            MedianBatch<16>(out.smoothed, nullptr, 0, win, network, x0, y, &out.denoised.At(x0, y));
-          } else {
-            MedianBatch<32>(out.smoothed, nullptr, 0, win, network, x0, y, &out.denoised.At(x0, y));
-          }
+          MedianBatchFor(out.smoothed, nullptr, 0, win, x0, y, &out.denoised.At(x0, y));
           continue;
         }
         for (int lane = 0; lane < kLanes; ++lane) {

@@ -2,12 +2,19 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 
 namespace probeless::recon {
 
 namespace {
 double MsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+// Process CPU time (all threads), milliseconds.
+double CpuMs() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 }  // namespace
 
@@ -81,8 +88,10 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
   ThreadPool* pool = pool_.get();
   FrameResult r;
   auto t = std::chrono::steady_clock::now();
+  double c = CpuMs();
   Preprocess(depth, intrinsics, options_.preprocess, frame_, pool);
   r.timings.preprocess_ms = MsSince(t);
+  r.timings.preprocess_cpu_ms = CpuMs() - c;
 
   bool integrate = true;
   if (known_pose != nullptr) {
@@ -90,6 +99,7 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
     state_ = TrackingState::kTracking;
   } else if (state_ != TrackingState::kEmpty) {
     t = std::chrono::steady_clock::now();
+    c = CpuMs();
     IcpOptions icp = options_.icp;
     if (state_ == TrackingState::kLost) {
       // Relocalisation against the model from the last good pose: more coarse iterations.
@@ -97,6 +107,7 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
     }
     r.icp = TrackIcp(frame_, model_, pose_, icp, pool);
     r.timings.icp_ms = MsSince(t);
+    r.timings.icp_cpu_ms = CpuMs() - c;
     if (r.icp.ok) {
       r.relocalised = state_ == TrackingState::kLost;
       pose_ = r.icp.camera_to_world;
@@ -113,23 +124,31 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
 
   if (integrate) {
     t = std::chrono::steady_clock::now();
+    c = CpuMs();
     volume_->Integrate(frame_.raw_depth, intrinsics, pose_, pool);
     r.timings.integrate_ms = MsSince(t);
+    r.timings.integrate_cpu_ms = CpuMs() - c;
     r.integrated = true;
     t = std::chrono::steady_clock::now();
+    c = CpuMs();
     const Intrinsics track_k = intrinsics.Level(options_.track_level);
     volume_->Raycast(pose_, track_k, view_, pool);
     BuildModelPyramid(view_, pose_, track_k, options_.preprocess.levels, model_);
     // D_v at the input resolution (nearest neighbour).
     volume_depth_.Resize(intrinsics.width, intrinsics.height);
     const int s = options_.track_level;
-    for (int y = 0; y < intrinsics.height; ++y) {
-      const int vy = std::min(y >> s, view_.depth.height - 1);
-      for (int x = 0; x < intrinsics.width; ++x) {
-        volume_depth_.At(x, y) = view_.depth.At(std::min(x >> s, view_.depth.width - 1), vy);
+    constexpr int kTasks = 8;
+    ParallelFor(pool, kTasks, [&](int task) {
+      for (int y = intrinsics.height * task / kTasks; y < intrinsics.height * (task + 1) / kTasks;
+           ++y) {
+        const int vy = std::min(y >> s, view_.depth.height - 1);
+        for (int x = 0; x < intrinsics.width; ++x) {
+          volume_depth_.At(x, y) = view_.depth.At(std::min(x >> s, view_.depth.width - 1), vy);
+        }
       }
-    }
+    });
     r.timings.raycast_ms = MsSince(t);
+    r.timings.raycast_cpu_ms = CpuMs() - c;
   } else {
     // Lost: the model stays the raycast from the last good pose (for relocalisation); D_v of
     // this view is unknown.
@@ -139,6 +158,7 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
 
   if (options_.merge_enabled) {
     t = std::chrono::steady_clock::now();
+    c = CpuMs();
     const GreyImage* grey = intensity;
     if (grey == nullptr) {
       no_intensity_.Resize(depth.width, depth.height);
@@ -148,6 +168,7 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
     ComputeVertexMap(merged_.denoised, intrinsics, merged_vertices_, pool);
     ComputeNormalMap(merged_vertices_, merged_normals_, pool);
     r.timings.merge_ms = MsSince(t);
+    r.timings.merge_cpu_ms = CpuMs() - c;
   }
   r.timings.total_ms = r.timings.preprocess_ms + r.timings.icp_ms + r.timings.integrate_ms +
                        r.timings.raycast_ms + r.timings.merge_ms;

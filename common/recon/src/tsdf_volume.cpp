@@ -11,7 +11,13 @@ namespace probeless::recon {
 
 namespace {
 constexpr int kBrick = 8;
+constexpr int kCoarse = 4;  // bricks per side of a coarse cell of the raycast's skip grid
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+// TSDF value of an unobserved voxel (weight 0): outside [-1, 1], so readers that only need to
+// know "observed or not" test the value and skip the weight array (one memory access less per
+// raycast sample). The first update overwrites it (running average with weight 0).
+constexpr float kUnobserved = 2.0f;
+constexpr float kUnobservedTest = 1.5f;  // tsdf > this <=> unobserved
 
 // World -> camera (float, row-major) for the integration kernel.
 struct RigidF {
@@ -71,21 +77,35 @@ TsdfVolume::TsdfVolume(const VolumeOptions& options) : options_(options) {
   voxel_size_ = options_.size_m / res_;
   inv_voxel_ = 1.0f / voxel_size_;
   const size_t n = static_cast<size_t>(res_) * res_ * res_;
-  tsdf_.assign(n, 1.0f);
+  tsdf_.assign(n, kUnobserved);
   weight_.assign(n, 0);
   observed_.assign(static_cast<size_t>(bricks_) * bricks_ * bricks_, 0);
   surface_.assign(observed_.size(), 0);
   touched_.assign(observed_.size(), 0);
+  coarse_side_ = (bricks_ + kCoarse - 1) / kCoarse;
+  coarse_.assign(static_cast<size_t>(coarse_side_) * coarse_side_ * coarse_side_, 0);
+}
+
+void TsdfVolume::UpdateCoarse() {
+  std::fill(coarse_.begin(), coarse_.end(), 0);
+  for (size_t b = 0; b < surface_.size(); ++b) {
+    if (!surface_[b]) continue;
+    const int bi = static_cast<int>(b % bricks_), bj = static_cast<int>((b / bricks_) % bricks_),
+              bk = static_cast<int>(b / (static_cast<size_t>(bricks_) * bricks_));
+    coarse_[(static_cast<size_t>(bk / kCoarse) * coarse_side_ + bj / kCoarse) * coarse_side_ +
+            bi / kCoarse] = 1;
+  }
 }
 
 void TsdfVolume::Reset() {
   for (size_t b = 0; b < observed_.size(); ++b) {
     if (!observed_[b]) continue;
-    std::fill_n(tsdf_.begin() + (b << 9), 512, 1.0f);
+    std::fill_n(tsdf_.begin() + (b << 9), 512, kUnobserved);
     std::fill_n(weight_.begin() + (b << 9), 512, 0);
     observed_[b] = 0;
     surface_[b] = 0;
   }
+  std::fill(coarse_.begin(), coarse_.end(), 0);
 }
 
 bool TsdfVolume::BrickObserved(int i, int j, int k) const {
@@ -200,6 +220,7 @@ IntegrateStats TsdfVolume::Integrate(const DepthImage& depth, const Intrinsics& 
     }
     updated[task] = count;
   });
+  UpdateCoarse();
   IntegrateStats stats;
   stats.bricks = static_cast<int>(list.size());
   for (uint64_t c : updated) stats.voxels += c;
@@ -209,10 +230,10 @@ IntegrateStats TsdfVolume::Integrate(const DepthImage& depth, const Intrinsics& 
 
 namespace {
 // Trilinear interpolation over the 8 voxels around continuous voxel coordinates g (voxel centres
-// at integers); also the gradient (per voxel unit). False if any voxel is unobserved or outside.
+// at integers); also the gradient (per voxel unit). False if any voxel is unobserved (tsdf =
+// kUnobserved) or outside.
 struct Sampler {
   const float* tsdf;
-  const uint8_t* weight;
   int res;
   int bricks;
   size_t Index(int i, int j, int k) const {
@@ -224,11 +245,16 @@ struct Sampler {
               k = static_cast<int>(std::floor(gz));
     if (i < 0 || j < 0 || k < 0 || i + 1 >= res || j + 1 >= res || k + 1 >= res) return false;
     float c[8];
-    for (int n = 0; n < 8; ++n) {
-      const size_t idx = Index(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2));
-      if (weight[idx] == 0) return false;
-      c[n] = tsdf[idx];
+    if ((i & 7) != 7 && (j & 7) != 7 && (k & 7) != 7) {
+      // All 8 voxels in one brick: fixed offsets from the first.
+      const float* base = tsdf + Index(i, j, k);
+      constexpr int kOffsets[8] = {0, 1, 8, 9, 64, 65, 72, 73};
+      for (int n = 0; n < 8; ++n) c[n] = base[kOffsets[n]];
+    } else {
+      for (int n = 0; n < 8; ++n) c[n] = tsdf[Index(i + (n & 1), j + ((n >> 1) & 1), k + (n >> 2))];
     }
+    for (int n = 0; n < 8; ++n)
+      if (c[n] > kUnobservedTest) return false;
     const float fx = gx - i, fy = gy - j, fz = gz - k;
     const float c00 = c[0] + (c[1] - c[0]) * fx, c10 = c[2] + (c[3] - c[2]) * fx;
     const float c01 = c[4] + (c[5] - c[4]) * fx, c11 = c[6] + (c[7] - c[6]) * fx;
@@ -247,7 +273,7 @@ struct Sampler {
 }  // namespace
 
 float TsdfVolume::TsdfAt(Vec3f p) const {
-  const Sampler s{tsdf_.data(), weight_.data(), res_, bricks_};
+  const Sampler s{tsdf_.data(), res_, bricks_};
   float v;
   const Vec3f o = options_.origin;
   if (!s.Trilinear((p.x - o.x) * inv_voxel_ - 0.5f, (p.y - o.y) * inv_voxel_ - 0.5f,
@@ -277,7 +303,7 @@ void TsdfVolume::March(Vec3f origin, Vec3f dir, float t_min, float t_max, float*
     t1 = std::min(t1, tb);
   }
   if (t0 >= t1) return;
-  const Sampler s{tsdf_.data(), weight_.data(), res_, bricks_};
+  const Sampler s{tsdf_.data(), res_, bricks_};
   const float mu = options_.truncation_m;
   const float brick_m = voxel_size_ * kBrick;
   const float inv_dir[3] = {1.0f / rd[0], 1.0f / rd[1], 1.0f / rd[2]};
@@ -290,12 +316,19 @@ void TsdfVolume::March(Vec3f origin, Vec3f dir, float t_min, float t_max, float*
     if (i < 0 || j < 0 || k < 0 || i >= res_ || j >= res_ || k >= res_) break;
     const size_t b = ((k >> 3) * bricks_ + (j >> 3)) * bricks_ + (i >> 3);
     if (!surface_[b]) {
-      // Empty-space skipping: jump to where the ray leaves this brick.
+      // Empty-space skipping: jump to where the ray leaves this brick, or its whole coarse cell
+      // (kCoarse^3 bricks) when no brick of the cell holds a surface.
       float t_exit = t1;
-      const int bc[3] = {i >> 3, j >> 3, k >> 3};
+      int bc[3] = {i >> 3, j >> 3, k >> 3};
+      float cell_m = brick_m;
+      const int ci = bc[0] / kCoarse, cj = bc[1] / kCoarse, ck = bc[2] / kCoarse;
+      if (!coarse_[(static_cast<size_t>(ck) * coarse_side_ + cj) * coarse_side_ + ci]) {
+        bc[0] = ci, bc[1] = cj, bc[2] = ck;
+        cell_m = brick_m * kCoarse;
+      }
       for (int a = 0; a < 3; ++a) {
         if (std::fabs(rd[a]) < 1e-12f) continue;
-        const float bound = (rd[a] > 0 ? bc[a] + 1 : bc[a]) * brick_m;
+        const float bound = (rd[a] > 0 ? bc[a] + 1 : bc[a]) * cell_m;
         t_exit = std::min(t_exit, (bound - ro[a]) * inv_dir[a]);
       }
       t = std::max(t_exit, t) + 1e-4f;
@@ -303,12 +336,12 @@ void TsdfVolume::March(Vec3f origin, Vec3f dir, float t_min, float t_max, float*
       continue;
     }
     const size_t idx = (b << 9) | ((k & 7) << 6) | ((j & 7) << 3) | (i & 7);
-    if (weight_[idx] == 0) {
+    const float f = tsdf_[idx];
+    if (f > kUnobservedTest) {
       prev_f = kNaN;
       t += 0.5f * mu;  // no surface can be here: the band around one is observed
       continue;
     }
-    const float f = tsdf_[idx];
     if (f < 0) {
       if (!(prev_f > 0)) {
         // The sample before was unobserved (frustum edges, unseen sides): accept a sample near
@@ -357,9 +390,9 @@ void TsdfVolume::Raycast(const Pose& camera_to_world, const Intrinsics& k, Geome
   const RigidF c2w(camera_to_world);
   const RigidF w2c(camera_to_world.Inverse());
   const Vec3f cam = camera_to_world.Translation();
-  // Range image: per 16 x 16-pixel tile the depth range [z_min, z_max] of the bricks near a
+  // Range image: per 8 x 8-pixel tile the depth range [z_min, z_max] of the bricks near a
   // surface that project into it (bounding boxes of the projected brick corners).
-  constexpr int kTile = 16;
+  constexpr int kTile = 8;
   constexpr float kNear = 0.1f;
   const int tiles_x = (k.width + kTile - 1) / kTile, tiles_y = (k.height + kTile - 1) / kTile;
   std::vector<float> z_min(static_cast<size_t>(tiles_x) * tiles_y, 1e30f);

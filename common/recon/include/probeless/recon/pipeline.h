@@ -46,7 +46,7 @@ enum class TrackingState {
   kLost,      // the last frame failed the tracking-quality test (not integrated)
 };
 
-// Wall-clock milliseconds spent in each stage of one frame.
+// Milliseconds spent in each stage of one frame: wall clock, and process CPU time.
 struct FrameTimings {
   double preprocess_ms = 0;  // mm -> m, bilateral filter, pyramid, vertex/normal maps
   double icp_ms = 0;
@@ -54,6 +54,13 @@ struct FrameTimings {
   double raycast_ms = 0;
   double merge_ms = 0;  // eq. 1-5 and G_r normals
   double total_ms = 0;  // all of the above
+  // Process CPU time (all threads of the process, so other work in the process counts too) of
+  // the same stages: on a loaded machine this, not the wall time, shows the cost of a stage.
+  double preprocess_cpu_ms = 0;
+  double icp_cpu_ms = 0;
+  double integrate_cpu_ms = 0;
+  double raycast_cpu_ms = 0;
+  double merge_cpu_ms = 0;
 };
 
 struct FrameResult {

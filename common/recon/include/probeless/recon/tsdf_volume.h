@@ -2,8 +2,9 @@
 // on the CPU: a dense grid stored as 8^3-voxel bricks, integrated only in the bricks touched by
 // the current depth's truncation band (plus already-observed bricks the rays pass through, so
 // free space is carved), and raycast with empty-space skipping: rays start and end at the depth
-// range of the bricks near a surface that project to their 16 x 16-pixel tile, and skip bricks
-// without any voxel near a surface (unobserved or pure free space).
+// range of the bricks near a surface that project to their 8 x 8-pixel tile, and skip bricks
+// without any voxel near a surface (unobserved or pure free space), whole 4^3-brick cells when
+// none of their bricks has one.
 // The volume lives in the world frame (metres): voxel (i, j, k) has its centre at
 // origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size.
 #pragma once
@@ -123,6 +124,8 @@ class TsdfVolume {
     return (static_cast<size_t>(b) << 9) | ((k & 7) << 6) | ((j & 7) << 3) | (i & 7);
   }
   void March(Vec3f origin, Vec3f dir, float t_min, float t_max, float* t_hit, Vec3f* normal) const;
+  // Recomputes coarse_ from surface_.
+  void UpdateCoarse();
 
   VolumeOptions options_;
   int res_ = 0;
@@ -134,6 +137,9 @@ class TsdfVolume {
   std::vector<uint8_t> observed_;  // per brick
   std::vector<uint8_t> surface_;   // per brick: holds a voxel with tsdf < 1 (near a surface)
   std::vector<uint8_t> touched_;   // per brick, scratch of Integrate
+  // Per coarse cell of 4^3 bricks: any brick of it has surface_ set (raycast skipping).
+  std::vector<uint8_t> coarse_;
+  int coarse_side_ = 0;  // coarse cells per side
 };
 
 // Writes `mesh` as a binary little-endian PLY (x y z nx ny nz float, vertex_indices uchar/int).
