@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <string>
@@ -334,6 +335,70 @@ TEST(EstimatorTest, RgbWithInvalidSamplesUsesTheFastDowndate) {
             "FaceLightEstimator: 2 validity words cover fewer than 294 samples");
 }
 
+// The residual statistics come from coefficient space on the fast paths (closed form with the
+// prior); they must equal the per-sample residuals of the returned light, with and without invalid
+// samples, RGB (channel means) and gray, and match the per-sample path of the robust mode.
+TEST(EstimatorTest, ResidualAndConfidenceMatchThePerSampleResiduals) {
+  const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 21));
+  EstimatorOptions prior;
+  prior.back_prior = 0.1;
+  const FaceLightEstimator estimator(model, prior);
+  std::vector<float> rgb(3 * 294);
+  const std::vector<double> lights[3] = {TestLight(30, 10), TestLight(-70, 20), TestLight(0, -35)};
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float> channel = Render(model, lights[c]);
+    for (int i = 0; i < 294; ++i) {
+      rgb[3 * i + c] = channel[i] + 0.02f * static_cast<float>(std::sin(1.7 * i + c));
+    }
+  }
+  std::vector<uint64_t> some_invalid(8, ~uint64_t{0});
+  for (int i = 3; i < 294; i += 9) {
+    some_invalid[i / 64] &= ~(uint64_t{1} << (i % 64));
+    rgb[3 * i + 1] = std::numeric_limits<float>::infinity();
+  }
+  std::vector<float> finite = rgb;
+  for (int i = 3; i < 294; i += 9) finite[3 * i + 1] = 0.3f;
+  const auto check = [&](const LightEstimate& e, const std::vector<float>& values, int channels,
+                         std::span<const uint64_t> bits) {
+    ASSERT_EQ(e.channels, channels);
+    double ss_res = 0, sum = 0, sum_sq = 0;
+    int used = 0;
+    for (int i = 0; i < 294; ++i) {
+      if (!bits.empty() && !((bits[i / 64] >> (i % 64)) & 1u)) continue;
+      double mean = 0, predicted = 0;
+      for (int c = 0; c < channels; ++c) mean += values[channels * i + c] / channels;
+      for (int n = 0; n < 9; ++n) {
+        double light = 0;
+        for (int c = 0; c < channels; ++c) light += e.coefficients[n][c] / channels;
+        predicted += model.rtf[i][n] * light;
+      }
+      ss_res += (mean - predicted) * (mean - predicted);
+      sum += mean;
+      sum_sq += mean * mean;
+      ++used;
+    }
+    ASSERT_EQ(e.samples_used, used);
+    const double rms = std::sqrt(ss_res / used);
+    const double r2 = 1 - ss_res / (sum_sq - sum * sum / used);
+    EXPECT_NEAR(e.rms_residual, rms, 1e-3 * rms + 1e-6);
+    EXPECT_NEAR(e.confidence, r2 * used / 294, 1e-4);
+  };
+  check(estimator.EstimateRgb(finite), finite, 3, {});
+  check(estimator.EstimateRgb(rgb, some_invalid), rgb, 3, some_invalid);
+  std::vector<float> gray(294);
+  for (int i = 0; i < 294; ++i) gray[i] = finite[3 * i];
+  check(estimator.EstimateGray(gray), gray, 1, {});
+  check(estimator.EstimateGray(gray, some_invalid), gray, 1, some_invalid);
+  // The robust mode computes them per sample: with nothing to reject it agrees.
+  EstimatorOptions robust = prior;
+  robust.robust = true;
+  robust.robust_threshold = 100;
+  const LightEstimate a = FaceLightEstimator(model, robust).EstimateRgb(finite);
+  const LightEstimate b = estimator.EstimateRgb(finite);
+  EXPECT_NEAR(a.rms_residual, b.rms_residual, 1e-3 * b.rms_residual);
+  EXPECT_NEAR(a.confidence, b.confidence, 1e-4);
+}
+
 TEST(EstimatorTest, RobustModeRejectsOutliers) {
   const FaceLightModel model = ModelFrom(SyntheticRtfs(294, 13));
   const std::vector<double> light = TestLight(-50, 15);
@@ -400,8 +465,8 @@ std::vector<float> SyntheticDirectionRtfs(int count, uint64_t seed, int bands) {
     const double y0 = sh::Basis9({0, 0, 1})[0];
     const double albedo = rtfs[i][0] * std::numbers::pi / (a0 * y0);
     sh::Vec3 normal{-rtfs[i][3], -rtfs[i][1], rtfs[i][2]};  // Y_1 = (-y, z, -x) * 0.4886
-    const double len = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] +
-                                 normal[2] * normal[2]);
+    const double len =
+        std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
     for (double& v : normal) v /= len;
     const std::vector<double> basis = sh::Basis(bands, normal);
     for (int k = 0; k < n; ++k) {
@@ -433,7 +498,8 @@ TEST(EstimatorTest, DirectionalFitRecoversTheDirection) {
     std::vector<float> values(count);
     for (int i = 0; i < count; ++i) {
       double v = 0.3 * model.direction_rtf[static_cast<size_t>(i) * 25];
-      for (int k = 0; k < 25; ++k) v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
+      for (int k = 0; k < 25; ++k)
+        v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
       values[i] = static_cast<float>(v);  // ModelFrom's intensity_exponent is 1
     }
     const LightEstimate fit = directional.EstimateGray(values);
@@ -461,7 +527,8 @@ TEST(EstimatorTest, DirectionalFitRecoversTheDirection) {
   std::mt19937_64 rng(3);
   for (int i = 0; i < count; ++i) {
     double v = 0;
-    for (int k = 0; k < 25; ++k) v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
+    for (int k = 0; k < 25; ++k)
+      v += 2.0 * y[k] * model.direction_rtf[static_cast<size_t>(i) * 25 + k];
     values[i] = static_cast<float>(v + 0.002 * (Uniform(rng) - 0.5) + (i % 15 == 4 ? 0.5 : 0));
   }
   const double plain_error = AngleDeg(directional.EstimateGray(values).dominant_direction, d);

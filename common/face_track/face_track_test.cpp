@@ -52,6 +52,18 @@ TEST(FaceTracker, BadModelPathsAreClearErrors) {
   o = {};
   o.redetect_period = 0;
   EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "redetect_period must be >= 1");
+  o = {};
+  o.flow_min_points = 2;
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "flow_min_points must be in 3..51");
+  o = {};
+  o.flow_agreement = 0;
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "flow_agreement must be > 0");
+  o = {};
+  o.max_undetected_frames = 0;
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "max_undetected_frames must be >= 1");
+  o = {};
+  o.clahe_clip_limit = -1;
+  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "clahe_clip_limit must be >= 0");
 }
 
 // Projects the generic model with a known pose; EstimateHeadPose recovers it.

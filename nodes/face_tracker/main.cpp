@@ -7,7 +7,8 @@
 // with publish_debug_image, `face/debug_image` (rgb8, samples drawn: paper figure 1c).
 //
 // Params: backend (dlib | yunet | haar), shape_predictor_path, yunet_model_path,
-// haar_cascade_path, redetect_period, detect_max_width, pose_smoothing, sample_model (default
+// haar_cascade_path, redetect_period, detect_max_width, pose_smoothing, flow_tracking (true),
+// clahe_clip_limit (4; 0 = off), max_undetected_frames (150), sample_model (default
 // data/face_light/default_model.txt: absolute, else relative to the working directory, the source
 // tree, then <prefix>/share/probeless), saturation_level, dark_level, min_facing_cosine,
 // neighbour_threshold, four_point_frame, publish_debug_image, image_transfer (linear: sample
@@ -52,6 +53,10 @@ int Run(int argc, char** argv) {
   options.redetect_period = node.Param("redetect_period", options.redetect_period);
   options.detect_max_width = node.Param("detect_max_width", options.detect_max_width);
   options.pose_smoothing = node.Param("pose_smoothing", options.pose_smoothing);
+  options.flow_tracking = node.Param("flow_tracking", options.flow_tracking);
+  options.clahe_clip_limit = node.Param("clahe_clip_limit", options.clahe_clip_limit);
+  options.max_undetected_frames =
+      node.Param("max_undetected_frames", options.max_undetected_frames);
   ft::SamplerOptions sampler_options;
   sampler_options.saturation_level =
       node.Param("saturation_level", sampler_options.saturation_level);

@@ -3,7 +3,7 @@
 // elevation (Knorr & Kurz 2014, sec. 5.1). Writes JSON figures and optional PNG plots.
 //
 //   face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]
-//                   [--landmarks aligned] --json OUT
+//                   [--landmarks aligned|tracker] [--head-pose none|tracker] --json OUT
 //                   [--plots DIR] [--ridge X] [--back-prior X] [--robust] [--robust-threshold X]
 //                   [--non-negative] [--weight-floor X]
 #include <algorithm>
@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -24,6 +25,8 @@
 #include "probeless/face_light/estimator.h"
 #include "probeless/face_light/model.h"
 #include "probeless/face_light/yaleb.h"
+#include "probeless/face_track/face_tracker.h"
+#include "probeless/face_track/sampling.h"
 #include "probeless/sh/sh.h"
 
 namespace fl = probeless::face_light;
@@ -35,14 +38,19 @@ constexpr double kDeg = 180 / std::numbers::pi;
 
 constexpr const char* kUsage =
     "usage: face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]\n"
-    "                       [--landmarks aligned]\n"
+    "                       [--landmarks aligned|tracker] [--head-pose none|tracker]\n"
     "                       --json OUT [--plots DIR] [estimator options]\n"
     "  --synthetic DIR       a `sim --yaleb-style` folder instead of --yaleb; with --rgb images\n"
     "                        (.ppm) the JSON adds colour_angle_deg_mean (docs/sim.md)\n"
     "  --subjects LIST       test subjects (default: every subject in DIR the model was not\n"
     "                        trained on); a training subject is an error\n"
-    "  --landmarks aligned   sample positions from the aligned crop (the only mode: the Yale B\n"
-    "                        crops are aligned to the canonical frame)\n"
+    "  --landmarks aligned|tracker  sample positions on the crop as it is (aligned, default), or\n"
+    "                        mapped onto each subject by the face tracker's landmarks on its\n"
+    "                        frontal-lit image, as the pipeline samples (tracker; train the\n"
+    "                        model with rtf_train --align tracker)\n"
+    "  --head-pose tracker   rotate each estimate from the face frame into the camera frame by\n"
+    "                        the subject's head rotation relative to the training subjects' mean,\n"
+    "                        from the face tracker on its frontal-lit image (default: none)\n"
     "  --plots DIR           write azimuth/elevation scatter plots and lat-long maps (PNG)\n"
     "  estimator options: --ridge X --back-prior X --robust --robust-threshold X\n"
     "                     --non-negative --weight-floor X --linear-direction\n"
@@ -286,8 +294,66 @@ ColourFigures EvaluateSyntheticColour(const std::string& dir, const std::vector<
   return figures;
 }
 
+// What the face tracker (dlib HOG + 68 landmarks + solvePnP of the generic head,
+// docs/face_light.md) finds on a subject's frontal-lit image (A = 0, E = 0): its head rotation
+// (face -> camera, row-major) and the canonical-crop -> image similarity the pipeline's sampler
+// would use (face_track::CanonicalToImage). Without CLAHE (more accurate landmarks on these evenly
+// lit crops, face_track_data_test); intrinsics f = 1050 px at the crop centre (a guess; the
+// rotation hardly depends on it: 3000 px changes the evaluation by < 0.05 degrees). Subjects
+// without a detected face are left out.
+struct FrontalTrack {
+  std::array<double, 9> rotation{};
+  fl::SimilarityTransform crop_to_image;
+};
+std::map<int, FrontalTrack> FrontalTracks(const std::string& dir,
+                                          const std::vector<int>& subjects) {
+  namespace ft = probeless::face_track;
+  ft::TrackerOptions options;
+  options.clahe_clip_limit = 0;
+  ft::FaceTracker tracker(options);
+  std::map<int, FrontalTrack> out;
+  for (int s : subjects) {
+    char name[64];
+    std::snprintf(name, sizeof name, "yaleB%02d/yaleB%02d_P00A+000E+00.pgm", s, s);
+    const std::string path = (std::filesystem::path(dir) / name).string();
+    if (!std::filesystem::exists(path)) continue;
+    const cv::Mat image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+    if (image.empty()) throw fl::FaceLightError(path + ": cannot decode image");
+    const ft::ImageView view{image.data, image.cols, image.rows, static_cast<size_t>(image.step),
+                             ft::PixelFormat::kGray};
+    const ft::FaceTrack t = tracker.DetectOnce(
+        view, ft::Intrinsics{1050, 1050, (image.cols - 1) / 2.0, (image.rows - 1) / 2.0});
+    if (t.found && t.pose.valid) {
+      out[s] = {t.pose.rotation, ft::CanonicalToImage(t.landmarks)};
+    }
+  }
+  return out;
+}
+
+// The rotation nearest the mean of rotation matrices (the mean re-orthonormalised by Gram-Schmidt
+// on its rows; the poses are within a few degrees of each other).
+std::array<double, 9> MeanRotation(const std::vector<std::array<double, 9>>& rotations) {
+  std::array<double, 9> r{};
+  for (const auto& m : rotations) {
+    for (int k = 0; k < 9; ++k) r[k] += m[k];
+  }
+  const auto normalise = [](double* v) {
+    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    for (int k = 0; k < 3; ++k) v[k] /= n;
+  };
+  normalise(&r[0]);
+  const double dot = r[0] * r[3] + r[1] * r[4] + r[2] * r[5];
+  for (int k = 0; k < 3; ++k) r[3 + k] -= dot * r[k];
+  normalise(&r[3]);
+  r[6] = r[1] * r[5] - r[2] * r[4];
+  r[7] = r[2] * r[3] - r[0] * r[5];
+  r[8] = r[0] * r[4] - r[1] * r[3];
+  return r;
+}
+
 int Run(int argc, char** argv) {
   std::string model_path, yaleb, subjects_text, json_path, plots, landmarks = "aligned";
+  std::string head_pose = "none";
   fl::EstimatorOptions options;
   bool synthetic = false;
   for (int i = 1; i < argc; ++i) {
@@ -330,6 +396,8 @@ int Run(int argc, char** argv) {
       subjects_text = value;
     } else if (flag == "--landmarks") {
       landmarks = value;
+    } else if (flag == "--head-pose") {
+      head_pose = value;
     } else if (flag == "--json") {
       json_path = value;
     } else if (flag == "--plots") {
@@ -359,9 +427,9 @@ int Run(int argc, char** argv) {
     std::cerr << "face_light_eval: --model, --yaleb and --json are required\n" << kUsage;
     return 2;
   }
-  if (landmarks != "aligned") {
+  if (landmarks != "aligned" && landmarks != "tracker") {
     throw fl::FaceLightError("--landmarks '" + landmarks +
-                             "' is not supported (only 'aligned': the Yale B crops are aligned)");
+                             "' is not supported (aligned: the crop as it is; tracker)");
   }
   const fl::FaceLightModel model = fl::LoadModel(model_path);
   const fl::FaceLightEstimator estimator(model, options);
@@ -388,6 +456,43 @@ int Run(int argc, char** argv) {
   }
   if (subjects.empty())
     throw fl::FaceLightError("no test subject left (all were used in training)");
+  if (head_pose != "none" && head_pose != "tracker") {
+    throw fl::FaceLightError("--head-pose '" + head_pose + "' is not supported (none or tracker)");
+  }
+  // Head rotation of each test subject relative to the model's frame (the mean face frame of its
+  // training subjects): R_s * mean^T (identity without --head-pose tracker).
+  std::map<int, std::array<double, 9>> to_camera;
+  std::map<int, FrontalTrack> frontal;
+  if (head_pose == "tracker" || landmarks == "tracker") {
+    std::vector<int> all = trained;
+    all.insert(all.end(), subjects.begin(), subjects.end());
+    frontal = FrontalTracks(yaleb, all);
+  }
+  if (head_pose == "tracker") {
+    std::vector<std::array<double, 9>> training_poses;
+    for (int s : trained) {
+      if (frontal.count(s)) training_poses.push_back(frontal.at(s).rotation);
+    }
+    if (training_poses.empty()) {
+      throw fl::FaceLightError("--head-pose tracker: no face found on any training subject");
+    }
+    const std::array<double, 9> mean = MeanRotation(training_poses);
+    for (int s : subjects) {
+      if (!frontal.count(s)) {
+        std::cerr << "face_light_eval: note: no face found on subject " << s
+                  << "'s frontal image, its estimates stay in the face frame\n";
+        continue;
+      }
+      const std::array<double, 9>& r = frontal.at(s).rotation;
+      std::array<double, 9> relative{};
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          for (int k = 0; k < 3; ++k) relative[3 * i + j] += r[3 * i + k] * mean[3 * j + k];
+        }
+      }
+      to_camera[s] = relative;
+    }
+  }
   if (!plots.empty()) std::filesystem::create_directories(plots);
 
   std::vector<Result> results;
@@ -396,10 +501,18 @@ int Run(int argc, char** argv) {
   std::vector<uint64_t> valid_bits((model.SampleCount() + 63) / 64);
   int figures = 0;
   for (int subject : subjects) {
+    fl::SimilarityTransform crop_to_image;  // identity: the crop as it is
+    if (landmarks == "tracker") {
+      if (frontal.count(subject)) {
+        crop_to_image = frontal.at(subject).crop_to_image;
+      } else {
+        std::cerr << "face_light_eval: note: no face found on subject " << subject
+                  << "'s frontal image, sampled on the crop as it is\n";
+      }
+    }
     for (const fl::YaleBImage& image : fl::LoadYaleBSubject(yaleb, subject)) {
       fl::SamplePatches(image.pixels.data(), image.width, image.height, image.width, 1,
-                        fl::SimilarityTransform{}, model.positions, model.patch_radius_px, 255,
-                        values, valid);
+                        crop_to_image, model.positions, model.patch_radius_px, 255, values, valid);
       std::fill(valid_bits.begin(), valid_bits.end(), 0);
       for (int i = 0; i < model.SampleCount(); ++i) {
         if (valid[i]) valid_bits[i / 64] |= uint64_t{1} << (i % 64);
@@ -412,8 +525,13 @@ int Run(int argc, char** argv) {
       r.true_azimuth = image.name.azimuth_deg;
       r.true_elevation = image.name.elevation_deg;
       r.microseconds = std::chrono::duration<double, std::micro>(stop - start).count();
-      const sh::Vec3 d{estimate.dominant_direction[0], estimate.dominant_direction[1],
-                       estimate.dominant_direction[2]};
+      sh::Vec3 d{estimate.dominant_direction[0], estimate.dominant_direction[1],
+                 estimate.dominant_direction[2]};
+      if (const auto it = to_camera.find(subject); it != to_camera.end()) {
+        const std::array<double, 9>& r = it->second;
+        d = {r[0] * d[0] + r[1] * d[1] + r[2] * d[2], r[3] * d[0] + r[4] * d[1] + r[5] * d[2],
+             r[6] * d[0] + r[7] * d[1] + r[8] * d[2]};
+      }
       const std::array<double, 3> t = fl::YaleBLightDirection(r.true_azimuth, r.true_elevation);
       if (estimate.channels == 0 || d == sh::Vec3{0, 0, 0}) {
         r.angular_error = 180;  // no estimate counts as the worst error
@@ -463,7 +581,8 @@ int Run(int argc, char** argv) {
       "  \"test_subjects\": [%s],\n  \"options\": {\"ridge\": %g, \"back_prior\": %g, "
       "\"robust\": %s, \"robust_threshold\": %g, \"non_negative\": %s, \"weight_floor\": %g, "
       "\"directional_fit\": %s, "
-      "\"directional_ambient\": %s, \"direction_bands\": %d},\n"
+      "\"directional_ambient\": %s, \"direction_bands\": %d, \"head_pose\": \"%s\", "
+      "\"landmarks\": \"%s\"},\n"
       "  \"images\": %zu,\n  \"angular_mean_deg\": %.3f,\n  \"angular_median_deg\": %.3f,\n"
       "  \"angular_std_deg\": %.3f,\n  \"angular_mean_deg_below_75\": %.3f,\n"
       "  \"fraction_above_75\": %.4f,\n  \"azimuth_mae_deg\": %.3f,\n  \"azimuth_std_deg\": %.3f,\n"
@@ -474,7 +593,8 @@ int Run(int argc, char** argv) {
       options.robust_threshold, options.non_negative ? "true" : "false", options.weight_floor,
       options.directional_fit ? "true" : "false", options.directional_ambient ? "true" : "false",
       options.directional_fit && options.use_direction_rtfs ? model.direction_bands : 0,
-      results.size(), Mean(angular), Median(angular), Std(angular), Mean(angular_75),
+      head_pose.c_str(), landmarks.c_str(), results.size(), Mean(angular), Median(angular),
+      Std(angular), Mean(angular_75),
       1.0 - static_cast<double>(angular_75.size()) / std::max<size_t>(results.size(), 1),
       Mean(azimuth), Std(azimuth), Mean(elevation), Std(elevation), Median(micros));
   std::string text = buffer;

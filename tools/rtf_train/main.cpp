@@ -4,27 +4,32 @@
 //   rtf_train --yaleb DIR | --synthetic DIR [--subjects LIST] [--points N] [--percentile P]
 //             [--patch-radius R]
 //             [--intensity-exponent G] [--grid-step PX] [--direction-bands B]
-//             [--direction-ridge X] --out MODEL
+//             [--direction-ridge X] [--align none|tracker] --out MODEL
 //
 // Progress goes to stderr; errors are one line on stderr and exit code 1 (2 for usage errors).
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "probeless/face_light/model.h"
 #include "probeless/face_light/training.h"
 #include "probeless/face_light/yaleb.h"
+#include "probeless/face_track/face_tracker.h"
+#include "probeless/face_track/sampling.h"
 
 namespace fl = probeless::face_light;
+namespace ft = probeless::face_track;
 
 namespace {
 
 constexpr const char* kUsage =
     "usage: rtf_train --yaleb DIR|--synthetic DIR [--subjects LIST] [--points N] [--percentile P]\n"
     "                 [--patch-radius R] [--intensity-exponent G] [--grid-step PX]\n"
-    "                 [--direction-bands B] [--direction-ridge X] --out MODEL\n"
+    "                 [--direction-bands B] [--direction-ridge X] [--align none|tracker]\n"
+    "                 --out MODEL\n"
     "  --yaleb DIR        Extended Yale B cropped folder (yaleBxx/ sub-folders)\n"
     "  --synthetic DIR    a Yale-B-style folder from `sim --yaleb-style` (same layout; the\n"
     "                     .pgm images are used, .ppm colour images are ignored)\n"
@@ -39,6 +44,9 @@ constexpr const char* kUsage =
     "  --direction-bands B  also fit B-band direction RTFs for the directional fit\n"
     "                     (0 = none, 4 or 5; default 5)\n"
     "  --direction-ridge X  Tikhonov weight of the direction RTF fit (default 1e-3)\n"
+    "  --align none|tracker  sample each subject on the crop as it is (none, default) or\n"
+    "                     mapped onto the face tracker's landmarks on its frontal-lit image,\n"
+    "                     as the pipeline samples (tracker; docs/face_light.md)\n"
     "  --out MODEL        model file to write\n";
 
 void Progress(const std::string& label, double fraction) {
@@ -66,6 +74,7 @@ int Run(int argc, char** argv) {
   options.percentile = 0;       // keep every candidate (512): best for the directional fit
   options.direction_bands = 5;  // direction RTFs, bands 0..4 (docs/face_light.md)
   double grid_step = 6.42;
+  std::string align = "none";
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (flag == "-h" || flag == "--help") {
@@ -93,6 +102,8 @@ int Run(int argc, char** argv) {
       options.direction_bands = static_cast<int>(ParseNumber(flag, value));
     } else if (flag == "--direction-ridge") {
       options.direction_ridge = ParseNumber(flag, value);
+    } else if (flag == "--align") {
+      align = value;
     } else if (flag == "--grid-step") {
       grid_step = ParseNumber(flag, value);
     } else if (flag == "--out") {
@@ -120,12 +131,42 @@ int Run(int argc, char** argv) {
     }
   }
   if (subjects.empty()) throw fl::FaceLightError(yaleb + ": no training subject found");
+  if (align != "none" && align != "tracker") {
+    throw fl::FaceLightError("--align '" + align + "' is not supported (none or tracker)");
+  }
+  std::optional<ft::FaceTracker> tracker;
+  if (align == "tracker") {
+    ft::TrackerOptions tracker_options;
+    tracker_options.clahe_clip_limit = 0;  // evenly lit crops: more accurate landmarks without
+    tracker.emplace(tracker_options);
+  }
 
   const std::vector<fl::Point2> candidates = fl::CandidatePositions(grid_step);
   std::vector<fl::TrainingImage> images;
   for (size_t s = 0; s < subjects.size(); ++s) {
     Progress("loading subjects", static_cast<double>(s) / subjects.size());
-    for (const fl::YaleBImage& image : fl::LoadYaleBSubject(yaleb, subjects[s])) {
+    const std::vector<fl::YaleBImage> loaded = fl::LoadYaleBSubject(yaleb, subjects[s]);
+    // --align tracker: the canonical crop -> image similarity of the landmarks the face tracker
+    // finds on the frontal-lit image (what FaceSampler does live), for all of the subject's images.
+    fl::SimilarityTransform crop_to_image;
+    if (tracker) {
+      bool found = false;
+      for (const fl::YaleBImage& image : loaded) {
+        if (image.name.azimuth_deg != 0 || image.name.elevation_deg != 0) continue;
+        const ft::ImageView view{image.pixels.data(), image.width, image.height,
+                                 static_cast<size_t>(image.width), ft::PixelFormat::kGray};
+        const ft::FaceTrack t = tracker->DetectOnce(
+            view, ft::Intrinsics{1050, 1050, (image.width - 1) / 2.0, (image.height - 1) / 2.0});
+        if (t.found) crop_to_image = ft::CanonicalToImage(t.landmarks), found = true;
+      }
+      if (!found) {
+        std::fprintf(stderr,
+                     "\nrtf_train: note: no face found on subject %d's frontal image, "
+                     "sampled on the crop as it is\n",
+                     subjects[s]);
+      }
+    }
+    for (const fl::YaleBImage& image : loaded) {
       fl::TrainingImage sample;
       sample.subject = image.name.subject;
       sample.azimuth_deg = image.name.azimuth_deg;
@@ -133,8 +174,8 @@ int Run(int argc, char** argv) {
       sample.values.resize(candidates.size());
       sample.valid.resize(candidates.size());
       fl::SamplePatches(image.pixels.data(), image.width, image.height, image.width, 1,
-                        fl::SimilarityTransform{}, candidates, options.patch_radius_px, 255,
-                        sample.values, sample.valid);
+                        crop_to_image, candidates, options.patch_radius_px, 255, sample.values,
+                        sample.valid);
       images.push_back(std::move(sample));
     }
   }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 #include "linalg.h"
 #include "probeless/msgs/sh_light.h"
@@ -16,10 +17,6 @@ constexpr int kN = kRtfCoefficients;
 constexpr int kMaxNnDirections = 1024;
 constexpr int kMaxPassive = 32;
 
-bool BitSet(std::span<const uint64_t> bits, int i) {
-  return bits.empty() || ((bits[i / 64] >> (i % 64)) & 1u);
-}
-
 // sum_i a[i] b[i] for count a multiple of 8, with 8 independent lanes so the compiler vectorises
 // it without -ffast-math.
 float Dot8(const float* a, const float* b, int count) {
@@ -31,7 +28,100 @@ float Dot8(const float* a, const float* b, int count) {
          ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]));
 }
 
-constexpr int kMaxDirN = 25;  // 5 bands
+constexpr int kMaxDirN = 25;       // 5 bands
+constexpr size_t kMaxGrid = 1024;  // EstimatorOptions::directional_grid
+
+// Normalisation constants of sh::EvaluateBasis for bands <= 5, index l(l+1)+m for m >= 0:
+// sqrt((2l+1)/(4 pi) (l-m)!/(l+m)!), times sqrt(2) for m > 0.
+struct BasisConstants {
+  double k[kMaxDirN] = {};
+  BasisConstants() {
+    for (int l = 0; l < 5; ++l) {
+      for (int m = 0; m <= l; ++m) {
+        double ratio = 1;
+        for (int f = l - m + 1; f <= l + m; ++f) ratio /= f;
+        const double k_lm = std::sqrt((2 * l + 1) / (4 * std::numbers::pi) * ratio);
+        k[l * (l + 1) + m] = m == 0 ? k_lm : std::numbers::sqrt2 * k_lm;
+      }
+    }
+  }
+};
+
+const BasisConstants& Constants() {
+  static const BasisConstants constants;
+  return constants;
+}
+
+// sh::EvaluateBasis<double> (same recurrence, same convention) with the normalisation constants
+// precomputed: the directional fit evaluates it ~50 times per estimate.
+void FastBasis(const BasisConstants& constants, int bands, double x, double y, double z,
+               double* out) {
+  double c = 1, s = 0;  // Re and Im of (x + i y)^m
+  double q_mm = 1;      // (-1)^m (2m-1)!!
+  for (int m = 0; m < bands; ++m) {
+    if (m > 0) {
+      const double c_next = c * x - s * y;
+      s = c * y + s * x;
+      c = c_next;
+      q_mm *= -static_cast<double>(2 * m - 1);
+    }
+    double q_prev2 = 0, q_prev = 0;
+    for (int l = m; l < bands; ++l) {
+      double q;
+      if (l == m) {
+        q = q_mm;
+      } else if (l == m + 1) {
+        q = z * (2 * m + 1) * q_prev;
+      } else {
+        q = ((2 * l - 1) * z * q_prev - (l + m - 1) * q_prev2) / (l - m);
+      }
+      const double scaled = constants.k[l * (l + 1) + m] * q;
+      if (m == 0) {
+        out[l * (l + 1)] = scaled;
+      } else {
+        out[l * (l + 1) + m] = scaled * c;
+        out[l * (l + 1) - m] = scaled * s;
+      }
+      q_prev2 = q_prev;
+      q_prev = q;
+    }
+  }
+}
+
+// Closed-form a (>= 0) and c of E = a Y + c e_0 for one direction from syy = Y^T M Y,
+// s0y = (M Y)_0, ry = b^T Y, s00 = M_00, r0 = b_0; returns the cost -(a ry + c r0).
+double ClosedFormCost(double syy, double s0y, double ry, double s00, double r0, bool ambient,
+                      double* a_out, double* c_out) {
+  double a = 0, c = 0, cost = 0;
+  if (ambient) {
+    const double det = syy * s00 - s0y * s0y;
+    if (det > 1e-12 * syy * s00) {
+      a = (ry * s00 - s0y * r0) / det;
+      c = (syy * r0 - s0y * ry) / det;
+    }
+    if (!(a > 0)) {
+      a = 0;
+      c = s00 > 0 ? r0 / s00 : 0;
+    }
+    cost = -(a * ry + c * r0);
+  } else {
+    a = syy > 0 ? std::max(ry / syy, 0.0) : 0;
+    cost = -a * ry;
+  }
+  if (a_out) *a_out = a;
+  if (c_out) *c_out = c;
+  return cost;
+}
+
+// Start directions of the directional fit with their basis values ([k * n + a]) and, for the
+// full-set cost matrix M, Y_k^T M Y_k and (M Y_k)_0.
+struct DirectionGrid {
+  std::span<const sh::Vec3> directions;
+  const double* basis = nullptr;
+  const double* basis_t = nullptr;  // transposed: [a * directions.size() + k]
+  const double* syy = nullptr;
+  const double* s0y = nullptr;
+};
 
 // Directional fit in coefficient space: minimise cost(E) = E^T M E - 2 b^T E (the least-squares
 // cost up to a constant) over E = a Y(d) + c e_0, a >= 0 (c = 0 without ambient). For a fixed d,
@@ -43,41 +133,35 @@ struct DirectionalProblem {
   int n;
   bool ambient;
 
+  const BasisConstants* constants;
+  // True if M is the full-set matrix, so the grids' precomputed Y^T M Y and (M Y)_0 hold.
+  bool tables = false;
+
   double Cost(const double* y, double* a_out = nullptr, double* c_out = nullptr) const {
-    double my[kMaxDirN];
+    // y^T M y from the lower triangle (M symmetric), (M y)_0 and b^T y.
     double syy = 0, ry = 0;
     for (int i = 0; i < n; ++i) {
-      double sum = 0;
       const double* row = m + i * n;
-      for (int j = 0; j < n; ++j) sum += row[j] * y[j];
-      my[i] = sum;
-      syy += y[i] * sum;
+      double off = 0;
+      for (int j = 0; j < i; ++j) off += row[j] * y[j];
+      syy += y[i] * (row[i] * y[i] + 2 * off);
       ry += b[i] * y[i];
     }
-    double a = 0, c = 0, cost = 0;
-    if (ambient) {
-      const double s0y = my[0], s00 = m[0], r0 = b[0];
-      const double det = syy * s00 - s0y * s0y;
-      if (det > 1e-12 * syy * s00) {
-        a = (ry * s00 - s0y * r0) / det;
-        c = (syy * r0 - s0y * ry) / det;
-      }
-      if (!(a > 0)) {
-        a = 0;
-        c = s00 > 0 ? r0 / s00 : 0;
-      }
-      cost = -(a * ry + c * r0);
-    } else {
-      a = syy > 0 ? std::max(ry / syy, 0.0) : 0;
-      cost = -a * ry;
-    }
-    if (a_out) *a_out = a;
-    if (c_out) *c_out = c;
-    return cost;
+    double s0y = 0;
+    for (int j = 0; j < n; ++j) s0y += m[j] * y[j];
+    return ClosedFormCost(syy, s0y, ry, m[0], b[0], ambient, a_out, c_out);
+  }
+  // Cost of direction k of a grid: from its tables (b^T Y only) when they hold for M.
+  double GridCost(const DirectionGrid& grid, size_t k) const {
+    const double* y = grid.basis + k * n;
+    if (!tables) return Cost(y);
+    double ry = 0;
+    for (int i = 0; i < n; ++i) ry += b[i] * y[i];
+    return ClosedFormCost(grid.syy[k], grid.s0y[k], ry, m[0], b[0], ambient, nullptr, nullptr);
   }
   double CostAt(const sh::Vec3& d, double* a = nullptr, double* c = nullptr) const {
     double y[kMaxDirN];
-    sh::EvaluateBasis<double>(bands, d[0], d[1], d[2], y);
+    FastBasis(*constants, bands, d[0], d[1], d[2], y);
     return Cost(y, a, c);
   }
 };
@@ -96,20 +180,39 @@ void Tangents(const sh::Vec3& d, sh::Vec3& t1, sh::Vec3& t2) {
 }
 
 sh::Vec3 Moved(const sh::Vec3& d, const sh::Vec3& t1, const sh::Vec3& t2, double u, double v) {
-  return Normalised({d[0] + u * t1[0] + v * t2[0], d[1] + u * t1[1] + v * t2[1],
-                     d[2] + u * t1[2] + v * t2[2]});
+  return Normalised(
+      {d[0] + u * t1[0] + v * t2[0], d[1] + u * t1[1] + v * t2[1], d[2] + u * t1[2] + v * t2[2]});
 }
 
 // Best start direction (init and the grid), then Newton steps with finite-difference derivatives
 // on the tangent plane, backtracking when a step does not lower the cost.
 sh::Vec3 FitDirection(const DirectionalProblem& problem, const sh::Vec3& init,
-                      std::span<const sh::Vec3> grid, const double* grid_basis, int iterations,
-                      double* power, double* ambient = nullptr) {
+                      const DirectionGrid& grid, int iterations, double* power,
+                      double* ambient = nullptr) {
   sh::Vec3 d = init;
   double best = problem.CostAt(d);
-  for (size_t k = 0; k < grid.size(); ++k) {
-    const double cost = problem.Cost(grid_basis + k * problem.n);
-    if (cost < best) best = cost, d = grid[k];
+  const size_t count = grid.directions.size();
+  if (problem.tables && count <= kMaxGrid) {
+    // M is the full-set matrix: b^T Y_k of every grid direction as one matrix-vector product,
+    // then the closed form with the precomputed Y_k^T M Y_k and (M Y_k)_0.
+    double ry[kMaxGrid];
+    std::fill(ry, ry + count, 0.0);
+    for (int a = 0; a < problem.n; ++a) {
+      const double* row = grid.basis_t + a * count;
+      const double ba = problem.b[a];
+      for (size_t k = 0; k < count; ++k) ry[k] += ba * row[k];
+    }
+    const double s00 = problem.m[0], r0 = problem.b[0];
+    for (size_t k = 0; k < count; ++k) {
+      const double cost = ClosedFormCost(grid.syy[k], grid.s0y[k], ry[k], s00, r0, problem.ambient,
+                                         nullptr, nullptr);
+      if (cost < best) best = cost, d = grid.directions[k];
+    }
+  } else {
+    for (size_t k = 0; k < count; ++k) {
+      const double cost = problem.GridCost(grid, k);
+      if (cost < best) best = cost, d = grid.directions[k];
+    }
   }
   constexpr double h = 1e-3;
   for (int it = 0; it < iterations; ++it) {
@@ -167,7 +270,8 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       !(options.directional_robust >= 0)) {
     throw FaceLightError(
         "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
-        "direction_ridge, directional_robust >= 0; robust_iterations 1..20; robust_threshold > 0; nn_directions "
+        "direction_ridge, directional_robust >= 0; robust_iterations 1..20; robust_threshold > 0; "
+        "nn_directions "
         "9..1024; nn_iterations 1..10000; directional_grid 0..1024; directional_iterations "
         "0..100)");
   }
@@ -224,8 +328,12 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
   stride_ = (n_samples + 7) / 8 * 8;
   pinv_.assign(static_cast<size_t>(kN) * stride_, 0.0f);
   rtf_t_.assign(static_cast<size_t>(kN) * stride_, 0.0f);
+  wrtf_t_.assign(static_cast<size_t>(kN) * stride_, 0.0f);
   for (int i = 0; i < n_samples; ++i) {
-    for (int n = 0; n < kN; ++n) rtf_t_[static_cast<size_t>(n) * stride_ + i] = rtf_[i * kN + n];
+    for (int n = 0; n < kN; ++n) {
+      rtf_t_[static_cast<size_t>(n) * stride_ + i] = rtf_[i * kN + n];
+      wrtf_t_[static_cast<size_t>(n) * stride_ + i] = weights_[i] * rtf_[i * kN + n];
+    }
   }
   for (int i = 0; i < n_samples; ++i) {
     double column[kN];
@@ -242,7 +350,8 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       for (int i = 0; i < n_samples; ++i) {
         const float* t = &dir_rtf_[static_cast<size_t>(i) * dir_n_];
         for (int a = 0; a < dir_n_; ++a) {
-          for (int b = 0; b < dir_n_; ++b) dir_normal_[a * dir_n_ + b] += weights_[i] * double(t[a]) * t[b];
+          for (int b = 0; b < dir_n_; ++b)
+            dir_normal_[a * dir_n_ + b] += weights_[i] * double(t[a]) * t[b];
         }
       }
       double dir_trace = 0;
@@ -251,13 +360,47 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
         dir_normal_[a * dir_n_ + a] += options.direction_ridge * dir_trace / dir_n_;
       }
     }
-    if (options.directional_grid > 0) dir_grid_ = sh::FibonacciSphere(options.directional_grid);
-    dir_grid_basis_.resize(dir_grid_.size() * dir_n_);
+    const std::vector<double> full_m =
+        dir_rtf_.empty() ? std::vector<double>(normal_.begin(), normal_.end()) : dir_normal_;
+    // Start directions with their basis values, Y^T M Y and (M Y)_0 for the full-set M.
+    const auto tabulate = [&](int count, std::vector<sh::Vec3>& directions,
+                              std::vector<double>& basis, std::vector<double>& syy,
+                              std::vector<double>& s0y) {
+      directions = count > 0 ? sh::FibonacciSphere(count) : std::vector<sh::Vec3>{};
+      basis.resize(directions.size() * dir_n_);
+      syy.resize(directions.size());
+      s0y.resize(directions.size());
+      for (size_t k = 0; k < directions.size(); ++k) {
+        double* y = &basis[k * dir_n_];
+        sh::EvaluateBasis<double>(dir_bands_, directions[k][0], directions[k][1], directions[k][2],
+                                  y);
+        double quadratic = 0;
+        for (int a = 0; a < dir_n_; ++a) {
+          double my = 0;
+          for (int b = 0; b < dir_n_; ++b) my += full_m[a * dir_n_ + b] * y[b];
+          quadratic += y[a] * my;
+          if (a == 0) s0y[k] = my;
+        }
+        syy[k] = quadratic;
+      }
+    };
+    tabulate(options.directional_grid, dir_grid_, dir_grid_basis_, dir_grid_syy_, dir_grid_s0y_);
+    dir_grid_basis_t_.resize(dir_grid_basis_.size());
     for (size_t k = 0; k < dir_grid_.size(); ++k) {
-      sh::EvaluateBasis<double>(dir_bands_, dir_grid_[k][0], dir_grid_[k][1], dir_grid_[k][2],
-                                &dir_grid_basis_[k * dir_n_]);
+      for (int a = 0; a < dir_n_; ++a) {
+        dir_grid_basis_t_[a * dir_grid_.size() + k] = dir_grid_basis_[k * dir_n_ + a];
+      }
+    }
+    const float* t_all = dir_rtf_.empty() ? rtf_.data() : dir_rtf_.data();
+    dir_wrtf_t_.assign(static_cast<size_t>(dir_n_) * stride_, 0.0f);
+    for (int i = 0; i < n_samples; ++i) {
+      for (int a = 0; a < dir_n_; ++a) {
+        dir_wrtf_t_[static_cast<size_t>(a) * stride_ + i] =
+            weights_[i] * t_all[static_cast<size_t>(i) * dir_n_ + a];
+      }
     }
   }
+  uniform_weights_ = options.weight_floor == 0;
   if (options.non_negative) {
     const std::vector<sh::Vec3> directions = sh::FibonacciSphere(options.nn_directions);
     nn_basis_.resize(directions.size() * kN);
@@ -319,12 +462,24 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     for (int c = 0; c < channels; ++c) sum += v[c][i];
     mean_value[i] = sum * inv_channels;
   }
+  // Valid = the caller's bit and finite values (x - x is 0 for finite x, NaN otherwise); written
+  // branch-free so the loops vectorise.
   for (int i = 0; i < n_samples; ++i) {
-    bool ok = BitSet(valid_bits, i);
-    for (int c = 0; c < channels; ++c) ok = ok && std::isfinite(values[i * channels + c]);
-    valid[i] = ok;
-    active[i] = ok;
-    valid_count += ok;
+    float check = 0;
+    for (int c = 0; c < channels; ++c) {
+      const float x = values[i * channels + c];
+      check += x - x;
+    }
+    valid[i] = check == 0.0f;
+  }
+  if (!valid_bits.empty()) {
+    for (int i = 0; i < n_samples; ++i) {
+      valid[i] &= static_cast<uint8_t>((valid_bits[i >> 6] >> (i & 63)) & 1u);
+    }
+  }
+  for (int i = 0; i < n_samples; ++i) {
+    active[i] = valid[i];
+    valid_count += valid[i];
   }
   LightEstimate out;
   out.samples_used = valid_count;
@@ -359,14 +514,13 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
         }
       }
     }
+    // rhs = T^T W v over the active samples: 8-lane dot products of the transposed weighted
+    // RTFs with the intensities, inactive ones zeroed.
+    alignas(32) float masked[kMaxSamples + 8];
     for (int c = 0; c < channels; ++c) {
-      double* acc = rhs[c];
-      std::fill(acc, acc + kN, 0.0);
-      for (int i = 0; i < n_samples; ++i) {
-        if (!active[i]) continue;
-        const double wv = weights[i] * double(v[c][i]);
-        const float* t = &rtf_[i * kN];
-        for (int n = 0; n < kN; ++n) acc[n] += t[n] * wv;
+      for (int i = 0; i < stride; ++i) masked[i] = i < n_samples && active[i] ? v[c][i] : 0.0f;
+      for (int n = 0; n < kN; ++n) {
+        rhs[c][n] = Dot8(&wrtf_t_[static_cast<size_t>(n) * stride], masked, stride);
       }
     }
     return internal::Cholesky<9>(factor);
@@ -449,8 +603,11 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     }
   }
 
-  // Outputs.
-  compute_residuals();
+  // Outputs. With the precomputed pseudo-inverse and unit weights the residual sum of squares
+  // has a closed form in coefficient space (below); otherwise the per-sample residuals.
+  const bool closed_form = !options_.robust && !options_.non_negative && uniform_weights_ &&
+                           !(options_.directional_robust > 0);
+  if (!closed_form) compute_residuals();
   double mean_light[kN] = {};
   for (int n = 0; n < kN; ++n) {
     for (int c = 0; c < 3; ++c) {
@@ -460,10 +617,14 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     }
   }
   sh::Vec3 direction = sh::OptimalLinearDirection(mean_light);
+  int active_count = 0;
+  for (int i = 0; i < n_samples; ++i) active_count += active[i];
+  const bool all_active = active_count == n_samples;
   if (options_.directional_fit) {
     // Cost matrix and vector of the directional fit (channel mean): E^T M E - 2 b^T E.
     const int dn = dir_n_;
     double m[kMaxDirN * kMaxDirN];
+    const double* cost_matrix = m;
     double b[kMaxDirN] = {};
     if (dir_rtf_.empty()) {
       if (fast) {
@@ -488,26 +649,45 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
         }
       }
     } else {
-      std::copy(dir_normal_.begin(), dir_normal_.end(), m);
-      for (int i = 0; i < n_samples; ++i) {
-        const float* t = &dir_rtf_[static_cast<size_t>(i) * dn];
-        const double w = weights[i];
-        if (!active[i]) {
+      // b = T^T W v over the active samples (8-lane dot products of the transposed weighted
+      // RTFs); M = the full-set matrix downdated by the inactive samples.
+      if (all_active && !(options_.directional_robust > 0)) {
+        cost_matrix = dir_normal_.data();  // used as it is
+      } else {
+        std::copy(dir_normal_.begin(), dir_normal_.end(), m);
+      }
+      const float* source = mean_value;
+      alignas(32) float masked[kMaxSamples + 8];
+      if (!all_active) {
+        for (int i = 0; i < stride; ++i) masked[i] = i < n_samples && active[i] ? mean_value[i] : 0;
+        source = masked;
+        for (int i = 0; i < n_samples; ++i) {
+          if (active[i]) continue;
+          const float* t = &dir_rtf_[static_cast<size_t>(i) * dn];
+          const double w = weights[i];
           for (int a = 0; a < dn; ++a) {
-            for (int k = 0; k < dn; ++k) m[a * dn + k] -= w * double(t[a]) * t[k];
+            const double wt = w * double(t[a]);
+            for (int k = 0; k <= a; ++k) m[a * dn + k] -= wt * t[k];
           }
-          continue;
         }
-        const double wv = w * double(mean_value[i]);
-        for (int a = 0; a < dn; ++a) b[a] += wv * t[a];
+        for (int a = 0; a < dn; ++a) {
+          for (int k = 0; k < a; ++k) m[k * dn + a] = m[a * dn + k];
+        }
+      }
+      for (int a = 0; a < dn; ++a) {
+        b[a] = Dot8(&dir_wrtf_t_[static_cast<size_t>(a) * stride], source, stride);
       }
     }
-    const DirectionalProblem problem{m, b, dir_bands_, dn, options_.directional_ambient};
-    const sh::Vec3 init =
-        direction == sh::Vec3{0, 0, 0} ? sh::Vec3{0, 0, -1} : direction;
+    // With every sample active M is the full-set matrix: the grids' quadratic terms are
+    // precomputed.
+    const DirectionalProblem problem{
+        cost_matrix, b, dir_bands_, dn, options_.directional_ambient, &Constants(), all_active};
+    const DirectionGrid grid{dir_grid_, dir_grid_basis_.data(), dir_grid_basis_t_.data(),
+                             dir_grid_syy_.data(), dir_grid_s0y_.data()};
+    const sh::Vec3 init = direction == sh::Vec3{0, 0, 0} ? sh::Vec3{0, 0, -1} : direction;
     double power = 0, ambient = 0;
-    sh::Vec3 fitted = FitDirection(problem, init, dir_grid_, dir_grid_basis_.data(),
-                                   options_.directional_iterations, &power, &ambient);
+    sh::Vec3 fitted =
+        FitDirection(problem, init, grid, options_.directional_iterations, &power, &ambient);
     if (options_.directional_robust > 0 && power > 0) {
       // One round of trimming under the directional model: drop samples whose residual exceeds
       // directional_robust * 1.4826 * MAD (cast shadows the RTFs blur, highlights), re-fit.
@@ -543,8 +723,10 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
       }
       if (dropped > 0 && count - dropped >= 2 * kN) {
         double power2 = 0;
-        const sh::Vec3 refit = FitDirection(problem, fitted, {}, nullptr,
-                                            options_.directional_iterations, &power2);
+        const DirectionalProblem trimmed{
+            m, b, dir_bands_, dn, options_.directional_ambient, &Constants(), false};
+        const sh::Vec3 refit =
+            FitDirection(trimmed, fitted, {}, options_.directional_iterations, &power2);
         if (power2 > 0) fitted = refit, power = power2;
       }
     }
@@ -555,17 +737,52 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
                       ? 0.0f
                       : static_cast<float>(sh::DirectionalPower(
                             std::span<const double>(mean_light, kN), direction));
-  int used = 0;
-  double mean = 0;
-  for (int i = 0; i < n_samples; ++i) {
-    if (active[i]) ++used, mean += mean_value[i];
-  }
-  mean /= std::max(used, 1);
+  const int used = active_count;
   double ss_res = 0, ss_tot = 0;
-  for (int i = 0; i < n_samples; ++i) {
-    if (!active[i]) continue;
-    ss_res += double(residual[i]) * residual[i];
-    ss_tot += (mean_value[i] - mean) * (mean_value[i] - mean);
+  if (closed_form) {
+    // Unit weights, e = N^-1 r with N = T^T T + R and r = T^T v over the active samples (the
+    // full set: r = N e), so |v - T e|^2 = v^T v - 2 e^T r + e^T (N - R) e
+    // = v^T v - e^T r - e^T R e (channel mean: the same with the mean intensities, light and r).
+    double lane_sum[4] = {}, lane_sq[4] = {};  // independent lanes: the loop vectorises
+    const int whole = n_samples / 4 * 4;
+    for (int i = 0; i < whole; i += 4) {
+      for (int l = 0; l < 4; ++l) {
+        const double x = active[i + l] ? double(mean_value[i + l]) : 0.0;
+        lane_sum[l] += x;
+        lane_sq[l] += x * x;
+      }
+    }
+    for (int i = whole; i < n_samples; ++i) {
+      const double x = active[i] ? double(mean_value[i]) : 0.0;
+      lane_sum[0] += x;
+      lane_sq[0] += x * x;
+    }
+    const double sum = (lane_sum[0] + lane_sum[1]) + (lane_sum[2] + lane_sum[3]);
+    const double sum_sq = (lane_sq[0] + lane_sq[1]) + (lane_sq[2] + lane_sq[3]);
+    double quadratic = 0;
+    for (int a = 0; a < kN; ++a) {
+      double r = 0, re = 0;
+      if (fast) {
+        for (int k = 0; k < kN; ++k) r += normal_[a * kN + k] * mean_light[k];
+      } else {
+        for (int c = 0; c < channels; ++c) r += rhs[c][a] / channels;
+      }
+      for (int k = 0; k < kN; ++k) re += prior_[a * kN + k] * mean_light[k];
+      quadratic += mean_light[a] * (r + re);
+    }
+    ss_res = std::max(0.0, sum_sq - quadratic);
+    ss_tot = std::max(0.0, sum_sq - sum * sum / std::max(used, 1));
+  } else {
+    double mean = 0;
+    for (int i = 0; i < n_samples; ++i) {
+      if (active[i]) mean += mean_value[i];
+    }
+    mean /= std::max(used, 1);
+    for (int i = 0; i < n_samples; ++i) {
+      if (!active[i]) continue;
+      ss_res += double(residual[i]) * residual[i];
+      ss_tot += (mean_value[i] - mean) * (mean_value[i] - mean);
+    }
   }
   out.channels = channels;
   out.samples_used = used;

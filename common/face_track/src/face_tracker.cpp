@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/objdetect.hpp>
+#include <opencv2/video/tracking.hpp>
 #include <optional>
 
 #include "dlib_landmarks.h"
@@ -82,8 +84,15 @@ struct FaceTracker::Impl {
   TrackerOptions options;
   internal::DlibLandmarks landmarks;
   cv::Ptr<cv::FaceDetectorYN> yunet;
+  cv::Ptr<cv::CLAHE> clahe;  // local contrast equalisation of the detector's image (or null)
   std::optional<cv::CascadeClassifier> haar;
-  cv::Mat gray;
+  cv::Mat gray;      // the image the detector, the predictor and the flow see
+  cv::Mat plain;     // this frame in gray (histogram-equalised if dark)
+  cv::Mat contrast;  // plain with CLAHE applied to equalized_area
+  cv::Mat padded, equalized_region;
+  cv::Rect equalized_area;  // bounding box of the regions equalised in this frame
+  cv::Rect track_region;    // tracking region (flow pyramids, CLAHE while tracking)
+  cv::Mat converted;        // owned gray conversion of an RGB / BGR frame
   cv::Mat equalized;
   cv::Mat work;  // padded / scaled detection input
   cv::Mat bgr;   // YuNet input
@@ -93,6 +102,10 @@ struct FaceTracker::Impl {
   int64_t frames = 0, full = 0, region = 0;
   HeadPose raw_pose;
   PoseFilter filter;
+  std::vector<cv::Mat> previous_pyramid;  // of the previous frame (flow)
+  // Landmarks carried by the flow alone since the last detection (not reset to the shape
+  // predictor's output, so its drift under changing shadows does not feed back).
+  std::array<Point2f, kLandmarkCount> flow_landmarks{};
 
   explicit Impl(const TrackerOptions& o)
       : options(o), landmarks(o.shape_predictor_path), filter(o.pose_smoothing) {
@@ -102,6 +115,13 @@ struct FaceTracker::Impl {
       throw FaceTrackError("detect_min_size must be in 0..4096");
     }
     if (!(o.max_scale_change > 1)) throw FaceTrackError("max_scale_change must be > 1");
+    if (o.flow_min_points < 3 || o.flow_min_points > 51) {
+      throw FaceTrackError("flow_min_points must be in 3..51");
+    }
+    if (!(o.flow_agreement > 0)) throw FaceTrackError("flow_agreement must be > 0");
+    if (!(o.clahe_clip_limit >= 0)) throw FaceTrackError("clahe_clip_limit must be >= 0");
+    if (o.clahe_clip_limit > 0) clahe = cv::createCLAHE(o.clahe_clip_limit, cv::Size(8, 8));
+    if (o.max_undetected_frames < 1) throw FaceTrackError("max_undetected_frames must be >= 1");
     if (!(o.pose_smoothing >= 0 && o.pose_smoothing < 1)) {
       throw FaceTrackError("pose_smoothing must be in [0, 1)");
     }
@@ -159,15 +179,79 @@ struct FaceTracker::Impl {
           cv::equalizeHist(in, equalized);
           gray = equalized;
         }
+        plain = gray;
+        StartFrame();
         return;
       case PixelFormat::kRgb:
-        cv::cvtColor(in, gray, cv::COLOR_RGB2GRAY);
+        cv::cvtColor(in, converted, cv::COLOR_RGB2GRAY);
         break;
       case PixelFormat::kBgr:
-        cv::cvtColor(in, gray, cv::COLOR_BGR2GRAY);
+        cv::cvtColor(in, converted, cv::COLOR_BGR2GRAY);
         break;
     }
-    if (options.equalize && Dark(gray)) cv::equalizeHist(gray, gray);
+    if (options.equalize && Dark(converted)) cv::equalizeHist(converted, converted);
+    gray = plain = converted;
+    StartFrame();
+  }
+
+  // With CLAHE: `contrast` starts as a copy of the plain frame (regions are equalised on demand).
+  void StartFrame() {
+    equalized_area = cv::Rect();
+    if (!clahe) return;
+    plain.copyTo(contrast);
+    gray = contrast;
+  }
+
+  // CLAHE (80 px tiles anchored at the image origin, tiles past the border reflected) of
+  // `region` of the plain frame, snapped outward to the tile grid, into `contrast` (which holds
+  // the plain frame elsewhere); the whole frame with the ~80 px tiles that divide it. Both grids
+  // are the same when 80 divides the frame (640 x 480, 1280 x 720), so the tracked face's pixels
+  // are equalised alike in every frame.
+  void EqualizeRegion(const cv::Rect& region) {
+    if (!clahe) return;
+    constexpr int kTile = 80;
+    const cv::Rect bounds(0, 0, plain.cols, plain.rows);
+    const cv::Rect clipped = region & bounds;
+    if (clipped.empty()) return;
+    const int x0 = clipped.x / kTile * kTile, y0 = clipped.y / kTile * kTile;
+    const int x1 = std::min(plain.cols, (clipped.br().x + kTile - 1) / kTile * kTile);
+    const int y1 = std::min(plain.rows, (clipped.br().y + kTile - 1) / kTile * kTile);
+    const cv::Rect snapped(x0, y0, x1 - x0, y1 - y0);
+    if (snapped == bounds) {  // the whole frame: ~80 px tiles that divide it (2 x 2 on Yale B)
+      clahe->setTilesGridSize(cv::Size(std::max(1, (plain.cols + kTile / 2) / kTile),
+                                       std::max(1, (plain.rows + kTile / 2) / kTile)));
+      clahe->apply(plain, contrast);
+      equalized_area = bounds;
+      return;
+    }
+    const int width = (snapped.width + kTile - 1) / kTile * kTile;
+    const int height = (snapped.height + kTile - 1) / kTile * kTile;
+    cv::Mat source = plain(snapped);
+    if (width != snapped.width || height != snapped.height) {
+      cv::copyMakeBorder(source, padded, 0, height - snapped.height, 0, width - snapped.width,
+                         cv::BORDER_REFLECT_101);
+      source = padded;
+    }
+    clahe->setTilesGridSize(cv::Size(width / kTile, height / kTile));
+    clahe->apply(source, equalized_region);
+    equalized_region(cv::Rect(0, 0, snapped.width, snapped.height)).copyTo(contrast(snapped));
+    equalized_area |= snapped;
+  }
+  void EqualizeAll() { EqualizeRegion(cv::Rect(0, 0, plain.cols, plain.rows)); }
+
+  // The tracking region for landmarks: three face boxes around them (covers the region
+  // re-detection's two boxes and the flow's motion), snapped to the CLAHE tile grid.
+  cv::Rect TrackingRegion(const std::array<Point2f, kLandmarkCount>& lms) const {
+    const Box b = LandmarkBox(lms);
+    const double cx = b.x + b.width / 2, cy = b.y + b.height / 2, half = 1.5 * b.width;
+    cv::Rect r(static_cast<int>(std::floor(cx - half)), static_cast<int>(std::floor(cy - half)),
+               static_cast<int>(std::ceil(2 * half)), static_cast<int>(std::ceil(2 * half)));
+    r &= cv::Rect(0, 0, plain.cols, plain.rows);
+    constexpr int kTile = 80;
+    const int x0 = r.x / kTile * kTile, y0 = r.y / kTile * kTile;
+    const int x1 = std::min(plain.cols, (r.br().x + kTile - 1) / kTile * kTile);
+    const int y1 = std::min(plain.rows, (r.br().y + kTile - 1) / kTile * kTile);
+    return cv::Rect(x0, y0, std::max(0, x1 - x0), std::max(0, y1 - y0));
   }
 
   // Backend detections on `input` (already padded / scaled), in its pixels.
@@ -272,11 +356,77 @@ struct FaceTracker::Impl {
     return landmarks.Landmarks(View(gray), LandmarkBox(first));
   }
 
+  // Follows the inner landmarks (17..67) of flow_landmarks from the previous frame to gray
+  // (pyramidal Lucas-Kanade, 21 x 21 window, 3 levels; a point counts if its forward-backward error
+  // is below 1 px + 2 % of the inter-ocular distance), fits a similarity to them (RANSAC, 3 % of
+  // the inter-ocular distance) and returns flow_landmarks moved by it and the number of inliers (0
+  // if the flow failed).
+  int Flow(std::array<Point2f, kLandmarkCount>& moved) {
+    constexpr int kFirst = 17;
+    if (previous_pyramid.empty() || track_region.empty()) return 0;
+    const double iod = InterOcular(flow_landmarks);
+    // Both pyramids are of `region` (pixels relative to its corner).
+    const cv::Point2f origin(static_cast<float>(track_region.x),
+                             static_cast<float>(track_region.y));
+    std::vector<cv::Point2f> from, to, back;
+    for (int i = kFirst; i < kLandmarkCount; ++i) {
+      from.emplace_back(cv::Point2f(flow_landmarks[i].x, flow_landmarks[i].y) - origin);
+    }
+    std::vector<cv::Mat> pyramid;
+    const cv::Size window(21, 21);
+    cv::buildOpticalFlowPyramid(gray(track_region), pyramid, window, 3, false);
+    std::vector<uint8_t> status, status_back;
+    std::vector<float> error;
+    const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
+    cv::calcOpticalFlowPyrLK(previous_pyramid, pyramid, from, to, status, error, window, 3,
+                             criteria);
+    cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid, to, back, status_back, error, window, 3,
+                             criteria);
+    std::vector<cv::Point2f> good_from, good_to;
+    const double max_fb = 1.0 + 0.02 * iod;
+    for (size_t i = 0; i < from.size(); ++i) {
+      if (!status[i] || !status_back[i]) continue;
+      if (std::hypot(back[i].x - from[i].x, back[i].y - from[i].y) > max_fb) continue;
+      good_from.push_back(from[i]);
+      good_to.push_back(to[i]);
+    }
+    previous_pyramid = std::move(pyramid);
+    if (static_cast<int>(good_from.size()) < options.flow_min_points) return 0;
+    std::vector<uint8_t> inliers;
+    const cv::Mat similarity = cv::estimateAffinePartial2D(
+        good_from, good_to, inliers, cv::RANSAC, std::max(1.0, 0.03 * iod), 200, 0.99, 10);
+    if (similarity.empty()) return 0;
+    int count = 0;
+    for (uint8_t v : inliers) count += v != 0;
+    const double* m = similarity.ptr<double>(0);
+    for (int i = 0; i < kLandmarkCount; ++i) {
+      const double x = flow_landmarks[i].x - origin.x, y = flow_landmarks[i].y - origin.y;
+      moved[i] = {static_cast<float>(m[0] * x + m[1] * y + m[2] + origin.x),
+                  static_cast<float>(m[3] * x + m[4] * y + m[5] + origin.y)};
+    }
+    return count;
+  }
+
+  // After a frame with a face: moves the tracking region if the face left it (equalising it in
+  // this frame) and keeps this frame's pyramid of the region for the next Flow unless Flow has
+  // (same region).
+  void UpdateRegion(const std::array<Point2f, kLandmarkCount>& lms, bool have_pyramid) {
+    const cv::Rect needed = TrackingRegion(lms);
+    if ((needed & track_region) != needed || track_region.empty()) {
+      track_region = needed;
+      have_pyramid = false;
+      if ((track_region & equalized_area) != track_region) EqualizeRegion(track_region);
+    }
+    if (!options.flow_tracking || have_pyramid || track_region.empty()) return;
+    cv::buildOpticalFlowPyramid(gray(track_region), previous_pyramid, cv::Size(21, 21), 3, false);
+  }
+
   FaceTrack Finish(const std::array<Point2f, kLandmarkCount>& lms, bool detected,
                    const Intrinsics& k, bool filtered) {
     FaceTrack t;
     t.found = true;
     t.detected = detected;
+    t.confidence = detected ? 1.0f : 0.0f;
     t.landmarks = lms;
     const Box b = LandmarkBox(lms);
     t.box = {float(b.x), float(b.y), float(b.width), float(b.height)};
@@ -311,9 +461,63 @@ FaceTrack FaceTracker::Track(const ImageView& image, const Intrinsics& intrinsic
   Impl& s = *impl_;
   s.ToGray(image);
   ++s.frames;
-  bool detected = false;
+  bool detected = false, flow_only = false, flowed = false;
+  double confidence = 1;
   std::array<Point2f, kLandmarkCount> lms{};
-  if (s.tracking) {
+  if (s.tracking) s.EqualizeRegion(s.track_region);
+  if (s.tracking && s.options.flow_tracking) {
+    // Flow first: it moves the flow landmarks to this frame.
+    std::array<Point2f, kLandmarkCount> moved{};
+    const int inliers = s.Flow(moved);
+    const bool flow_ok = inliers >= s.options.flow_min_points;
+    const Box box = LandmarkBox(flow_ok ? moved : s.previous);
+    flowed = inliers > 0 || !s.previous_pyramid.empty();
+    bool redetected = false, redetect_failed = false;
+    if (s.frames - s.last_detection >= s.options.redetect_period) {
+      ++s.region;
+      if (auto found = s.DetectRegion(box)) {
+        lms = s.FromDetection(*found);
+        detected = redetected = true;
+        s.last_detection = s.frames;
+      } else {
+        redetect_failed = true;
+      }
+    }
+    if (!redetected) {
+      if ((!flow_ok && redetect_failed) ||
+          s.frames - s.last_detection > s.options.max_undetected_frames) {
+        s.tracking = false;
+      } else if (!flow_ok) {
+        // No flow (e.g. unrelated frames such as a Yale B sequence): landmarks in the previous
+        // box as without flow tracking, unverified, and the flow restarts from them.
+        lms = s.landmarks.Landmarks(s.View(s.gray), box);
+        s.flow_landmarks = lms;
+        confidence = 0.5;
+      } else {
+        s.flow_landmarks = moved;
+        lms = s.landmarks.Landmarks(s.View(s.gray), box);
+        std::vector<double> distances;
+        for (int i = 17; i < kLandmarkCount; ++i) {
+          distances.push_back(std::hypot(lms[i].x - moved[i].x, lms[i].y - moved[i].y));
+        }
+        std::nth_element(distances.begin(), distances.begin() + distances.size() / 2,
+                         distances.end());
+        const double agreement = distances[distances.size() / 2] / InterOcular(moved);
+        confidence = static_cast<double>(inliers) / (kLandmarkCount - 17);
+        if (!(agreement < s.options.flow_agreement)) {
+          lms = moved;  // the predictor lost the half-lit face: keep the flow's landmarks
+          flow_only = true;
+          confidence *= 0.5;
+        }
+      }
+    }
+    if (s.tracking) {
+      const double ratio = InterOcular(lms) / std::max(1e-6, InterOcular(s.previous));
+      if (!(ratio < s.options.max_scale_change && ratio > 1 / s.options.max_scale_change)) {
+        s.tracking = false;
+      }
+    }
+  } else if (s.tracking) {
     const Box previous_box = LandmarkBox(s.previous);
     if (s.frames - s.last_detection >= s.options.redetect_period) {
       ++s.region;
@@ -335,6 +539,8 @@ FaceTrack FaceTracker::Track(const ImageView& image, const Intrinsics& intrinsic
     }
   }
   if (!s.tracking) {
+    s.EqualizeAll();
+    s.track_region = cv::Rect();
     s.raw_pose = {};
     s.filter.Reset();
     ++s.full;
@@ -342,16 +548,24 @@ FaceTrack FaceTracker::Track(const ImageView& image, const Intrinsics& intrinsic
     if (!box) return {};
     lms = s.FromDetection(*box);
     detected = true;
+    flow_only = false;
+    confidence = 1;
     s.tracking = true;
     s.last_detection = s.frames;
   }
   s.previous = lms;
-  return s.Finish(lms, detected, intrinsics, true);
+  if (detected) s.flow_landmarks = lms;
+  s.UpdateRegion(lms, flowed && s.tracking);
+  FaceTrack t = s.Finish(lms, detected, intrinsics, true);
+  t.flow = flow_only;
+  t.confidence = static_cast<float>(detected ? 1.0 : confidence);
+  return t;
 }
 
 FaceTrack FaceTracker::DetectOnce(const ImageView& image, const Intrinsics& intrinsics) {
   Impl& s = *impl_;
   s.ToGray(image);
+  s.EqualizeAll();
   const auto box = s.DetectFull();
   if (!box) return {};
   return s.Finish(s.FromDetection(*box), true, intrinsics, false);

@@ -100,6 +100,12 @@ FaceSampler::FaceSampler(const fl::FaceLightModel& model, const SamplerOptions& 
   }
 }
 
+fl::SimilarityTransform CanonicalToImage(std::span<const Point2f> landmarks, bool four_point) {
+  const auto live = CanonicalLandmarks(landmarks);
+  const size_t used = four_point ? 4 : 2;
+  return fl::FitSimilarity(std::span(kTrackerCanonical.data(), used), std::span(live.data(), used));
+}
+
 FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) const {
   if (!track.found) throw FaceTrackError("face sampler: no face in this track");
   if (!image.data || image.width <= 0 || image.height <= 0) {
@@ -116,8 +122,7 @@ FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) 
   const auto live = CanonicalLandmarks(track.landmarks);
   const std::array<fl::Point2, 4> canonical = kTrackerCanonical;
   const size_t used = options_.four_point_frame ? 4 : 2;
-  out.crop_to_image =
-      fl::FitSimilarity(std::span(canonical.data(), used), std::span(live.data(), used));
+  out.crop_to_image = CanonicalToImage(track.landmarks, options_.four_point_frame);
   double residual = 0;
   for (size_t i = 0; i < used; ++i) {
     const fl::Point2 p = out.crop_to_image.Apply(canonical[i]);
@@ -149,8 +154,7 @@ FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) 
     if (options_.srgb_input) {
       // Decoding the patch mean, not each pixel: a slight underestimate on textured patches.
       for (int c = 0; c < 3; ++c) {
-        rgb[c] = rgb[c] <= 0.04045f ? rgb[c] / 12.92f
-                                    : std::pow((rgb[c] + 0.055f) / 1.055f, 2.4f);
+        rgb[c] = rgb[c] <= 0.04045f ? rgb[c] / 12.92f : std::pow((rgb[c] + 0.055f) / 1.055f, 2.4f);
       }
     }
     mean[i] = (rgb[0] + rgb[1] + rgb[2]) / 3;
@@ -205,7 +209,8 @@ FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) 
     }
   }
   const double fit_term = iod > 0 ? std::clamp(1 - fit_rms / (0.05 * iod), 0.0, 1.0) : 0.0;
-  out.quality = static_cast<float>(static_cast<double>(out.ValidCount()) / n * fit_term);
+  out.quality = static_cast<float>(static_cast<double>(out.ValidCount()) / n * fit_term *
+                                   std::clamp(static_cast<double>(track.confidence), 0.0, 1.0));
   return out;
 }
 

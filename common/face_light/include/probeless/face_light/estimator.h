@@ -48,7 +48,7 @@ struct EstimatorOptions {
   // dominant_direction and intensity change; the SH coefficients stay the linear estimate.
   bool directional_fit = true;
   int directional_grid = 64;        // 0..1024 start directions (0 = start from the linear one)
-  int directional_iterations = 10;  // 0..100 Newton steps
+  int directional_iterations = 3;   // 0..100 Newton steps (3: as accurate as 10 on Yale B)
   bool directional_ambient = true;  // fit the ambient term c (false: c = 0)
   // > 0: after the fit, drop samples whose residual under the fitted light exceeds this many
   // robust standard deviations (1.4826 MAD) and re-fit once from the fitted direction. 0 = off.
@@ -121,6 +121,7 @@ class FaceLightEstimator {
   std::vector<float> rtf_;           // [i * 9 + n]
   int stride_ = 0;                   // sample count rounded up to a multiple of 8
   std::vector<float> rtf_t_;         // [n * stride_ + i] (transposed, zero padded)
+  std::vector<float> wrtf_t_;        // the same times the sample weights
   std::vector<float> pinv_;          // [n * stride_ + i], (T^T W T + R)^-1 T^T W (full set), padded
   std::vector<float> weights_;       // per-sample weight (1 or training-residual based)
   std::array<double, 81> normal_{};  // T^T W T + R (full valid set)
@@ -129,10 +130,18 @@ class FaceLightEstimator {
   // Directional fit: start directions and their basis values ([k * dir_n_ + n]).
   std::vector<sh::Vec3> dir_grid_;
   std::vector<double> dir_grid_basis_;
-  int dir_bands_ = 3;                 // bands of the directional fit (3, or the direction RTFs')
-  int dir_n_ = 9;                     // dir_bands_^2
-  std::vector<float> dir_rtf_;        // [i * dir_n_ + n] direction RTFs (empty: use rtf_)
-  std::vector<double> dir_normal_;    // their T^T W T + ridge (full valid set), dir_n_^2
+  int dir_bands_ = 3;               // bands of the directional fit (3, or the direction RTFs')
+  int dir_n_ = 9;                   // dir_bands_^2
+  std::vector<float> dir_rtf_;      // [i * dir_n_ + n] direction RTFs (empty: use rtf_)
+  std::vector<double> dir_normal_;  // their T^T W T + ridge (full valid set), dir_n_^2
+  // Weighted RTFs of the fit, transposed and zero padded: [n * stride_ + i] = w_i t_in.
+  std::vector<float> dir_wrtf_t_;
+  // Per grid direction k, for the full valid set: Y_k^T M Y_k and (M Y_k)_0 (M = dir_normal_, or
+  // normal_ for the 9-coefficient fit).
+  std::vector<double> dir_grid_basis_t_;  // [a * grid size + k]
+  std::vector<double> dir_grid_syy_;
+  std::vector<double> dir_grid_s0y_;
+  bool uniform_weights_ = true;  // every weight is 1 (weight_floor = 0)
 };
 
 // Writes an estimate into an msgs::ShLight (bands = 3, coefficients, dominant_direction,

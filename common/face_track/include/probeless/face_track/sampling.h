@@ -51,9 +51,9 @@ struct FaceSamples {
   int count = 0;
   std::vector<float> rgb;  // [3 i + c], patch mean / 255 of R, G, B (gray: R = G = B), sRGB-decoded
                            // with SamplerOptions::srgb_input
-  std::vector<uint8_t> flags;       // SampleFlag bits, 0 = valid
-  std::vector<float> normals;       // [3 i + k], unit normal in the camera frame
-  std::vector<float> image_points;  // [2 i + k], patch centre x, y in image pixels
+  std::vector<uint8_t> flags;                     // SampleFlag bits, 0 = valid
+  std::vector<float> normals;                     // [3 i + k], unit normal in the camera frame
+  std::vector<float> image_points;                // [2 i + k], patch centre x, y in image pixels
   face_light::SimilarityTransform crop_to_image;  // canonical crop pixels -> image pixels
   float quality = 0;                              // [0, 1], see FaceSampler::Sample
   int ValidCount() const;
@@ -71,6 +71,12 @@ inline constexpr std::array<face_light::Point2, 4> kTrackerCanonical{
     face_light::Point2{34.2, 49.0}, face_light::Point2{130.0, 49.3}, face_light::Point2{81.6, 94.3},
     face_light::Point2{81.3, 147.2}};
 
+// The similarity from canonical crop pixels to image pixels the sampler uses for landmarks:
+// FitSimilarity of kTrackerCanonical onto their CanonicalLandmarks (four points, or the two eyes
+// with four_point = false).
+face_light::SimilarityTransform CanonicalToImage(std::span<const Point2f> landmarks,
+                                                 bool four_point = true);
+
 class FaceSampler {
  public:
   // Precomputes per sample its face-frame point and normal (an ellipsoid head fitted to the
@@ -80,8 +86,9 @@ class FaceSampler {
 
   int SampleCount() const { return static_cast<int>(positions_.size()); }
   // Samples `image` for a found track. quality = (valid / count) * clamp(1 - fit_rms / (0.05 *
-  // inter-ocular distance), 0, 1), fit_rms = RMS residual of the canonical-landmark similarity
-  // fit (pixels). Throws FaceTrackError if !track.found or the image is empty.
+  // inter-ocular distance), 0, 1) * track.confidence, fit_rms = RMS residual of the
+  // canonical-landmark similarity fit (pixels). Throws FaceTrackError if !track.found or the
+  // image is empty.
   FaceSamples Sample(const ImageView& image, const FaceTrack& track) const;
 
   // Face-frame sample points (metres) and unit normals, model order.
