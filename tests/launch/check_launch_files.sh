@@ -9,6 +9,7 @@ declare -A args=(
   [launch/face_yaleb.yaml]="yaleb:=/tmp"
   [launch/fusion_7scenes.yaml]="source:=/tmp"
   [launch/scene_light.yaml]="log:=/tmp/x.mcap"
+  [launch/replay.yaml]="source:=/tmp/x.mcap fuse:=true render:=true record:=true respawn:=true"
   [launch/capture/freenect_fakenect.launch.yaml]="dump:=/tmp"
   [tests/replay/lockstep.launch.yaml]="source:=/tmp probe:=/bin/true output:=/tmp/x"
 )
