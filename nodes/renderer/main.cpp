@@ -190,11 +190,6 @@ int Run(int argc, char** argv) {
                         intrinsics = render::IntrinsicsFromMsg(
                             *msgs::ReadMessage<msgs::CameraInfo>(s.data()));
                       }});
-  handlers.push_back({&light_sub, [&](bus::Sample&& s) {
-                        light = render::LightFromMsg(*msgs::ReadMessage<msgs::ShLight>(s.data()));
-                        have_light = true;
-                        if (trigger == "light") render_frame();
-                      }});
   handlers.push_back({&face_sub, [&](bus::Sample&& s) {
                         face = *msgs::ReadMessage<msgs::FaceObservation>(s.data());
                         have_face = true;
@@ -216,6 +211,15 @@ int Run(int argc, char** argv) {
                         const auto m = msgs::ReadMessage<msgs::TransferBuffer>(s.data());
                         render::TransferValues(*m, m.payload, transfer_virtual);
                       }});
+  // The light comes last: Spin serves ready subscriptions in this order, and a frame's image, head
+  // pose, scene pose and G_r are published before the light computed from them, so with
+  // trigger=light a frame is drawn with its own inputs even when the node wakes late.
+  handlers.push_back({&light_sub, [&](bus::Sample&& s) {
+                        light = render::LightFromMsg(*msgs::ReadMessage<msgs::ShLight>(s.data()));
+                        have_light = true;
+                        if (trigger == "light") render_frame();
+                      }});
+
   node.Spin(handlers);
   node.Info() << "rendered " << frames << " frames";
   return 0;

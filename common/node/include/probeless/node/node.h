@@ -81,7 +81,9 @@ struct Handler {
   std::function<void(bus::Sample&&)> on_sample;
 };
 // Waits on all handlers' subscribers at once and passes every received sample to its handler, in
-// arrival order per subscriber, until shutdown (same promptness as Spin above).
+// arrival order per subscriber, until shutdown (same promptness as Spin above). When several
+// subscribers are ready at one wake-up they are served in the order of `handlers` (put a topic
+// that triggers work after the topics whose latest state that work reads).
 void Spin(const std::vector<Handler>& handlers);
 
 // Paces a loop at a fixed rate: `while (rate.Sleep()) {...}`. Deadlines are start + k / hz; if the
