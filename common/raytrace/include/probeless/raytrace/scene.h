@@ -14,12 +14,15 @@
 #include <string>
 #include <vector>
 
+#include "probeless/parallel/thread_pool.h"
 #include "probeless/raytrace/geometry.h"
 #include "probeless/raytrace/mesh.h"
 
 namespace probeless::raytrace {
 
-class ThreadPool;
+// The project's one thread pool (probeless/parallel/thread_pool.h): ParallelFor(count, fn) and
+// thread_count(); the batched queries and renders take an optional pool.
+using ThreadPool = parallel::ThreadPool;
 
 // A linear-RGB image used as albedo texture or lat-long environment. Pixel (x, y) at
 // linear_rgb[(y * width + x) * 3 + c].
@@ -147,25 +150,6 @@ class Scene {
 
   // Internal: the Embree scene handle (RTCScene) for the renderer.
   void* embree_scene() const;
-
- private:
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
-};
-
-// A fixed pool of std::threads running index ranges in parallel; deterministic results are the
-// caller's business (work items must not depend on which thread runs them).
-class ThreadPool {
- public:
-  // `threads` >= 1 workers (the calling thread also works while waiting).
-  explicit ThreadPool(int threads);
-  ~ThreadPool();
-  ThreadPool(const ThreadPool&) = delete;
-  ThreadPool& operator=(const ThreadPool&) = delete;
-  int thread_count() const;
-  // Calls fn(i) for every i in [0, count) across the workers and returns when all are done.
-  // Exceptions thrown by fn are rethrown here (the first one).
-  void ParallelFor(size_t count, const std::function<void(size_t)>& fn);
 
  private:
   struct Impl;
