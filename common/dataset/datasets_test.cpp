@@ -10,9 +10,9 @@
 #include <opencv2/videoio.hpp>
 
 #include "internal.h"
+#include "probeless/dataset/yaleb.h"
 #include "testing_util.h"
 #include "text_io.h"
-#include "yaleb.h"
 
 namespace probeless::dataset {
 namespace {
@@ -478,9 +478,9 @@ TEST(TumTest, FreiburgIntrinsicsAndCameraInfoOverrides) {
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros + "' is for 640x480 images, the dataset's are 40x30");
   WriteText(ros, "image_width: 40\n");
-  EXPECT_EQ(
-      ErrorOf([&] { OpenDataset(fr1.path, options); }),
-      "calibration file '" + ros + "': missing camera_matrix (expected a ROS camera_info YAML file)");
+  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+            "calibration file '" + ros +
+                "': missing camera_matrix (expected a ROS camera_info YAML file)");
   WriteText(ros, "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0]}\n");
   EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros + "': camera matrix has 8 entries, expected 9 (3x3)");
@@ -570,20 +570,20 @@ struct YaleFolder {
 };
 
 TEST(YaleBTest, FileNames) {
-  const auto name = internal::ParseYaleBName("yaleB07_P00A-035E+65.pgm");
+  const auto name = ParseYaleBName("yaleB07_P00A-035E+65.pgm");
   ASSERT_TRUE(name.has_value());
   EXPECT_EQ(name->subject, 7);
   EXPECT_EQ(name->azimuth_deg, -35);
   EXPECT_EQ(name->elevation_deg, 65);
-  EXPECT_FALSE(internal::ParseYaleBName("yaleB07_P00_Ambient.pgm").has_value());
-  EXPECT_FALSE(internal::ParseYaleBName("yaleB07_P00A-035E+65.pgm.bad").has_value());
-  EXPECT_FALSE(internal::ParseYaleBName("yaleB07_P00A035E+65.pgm").has_value());
+  EXPECT_FALSE(ParseYaleBName("yaleB07_P00_Ambient.pgm").has_value());
+  EXPECT_FALSE(ParseYaleBName("yaleB07_P00A-035E+65.pgm.bad").has_value());
+  EXPECT_FALSE(ParseYaleBName("yaleB07_P00A035E+65.pgm").has_value());
   EXPECT_EQ(YaleName(3, -5, 0), "yaleB03_P00A-005E+00.pgm");
 }
 
 TEST(YaleBTest, LightDirectionsFollowTheCameraFrame) {
   auto expect_direction = [](double a, double e, double x, double y, double z) {
-    const std::array<double, 3> d = internal::YaleBLightDirection(a, e);
+    const std::array<double, 3> d = YaleBLightDirection(a, e);
     EXPECT_NEAR(d[0], x, 1e-12) << a << " " << e;
     EXPECT_NEAR(d[1], y, 1e-12) << a << " " << e;
     EXPECT_NEAR(d[2], z, 1e-12) << a << " " << e;
@@ -633,7 +633,7 @@ TEST(YaleBTest, SubjectsThenAzimuthThenElevationWithLights) {
     EXPECT_EQ(light->bands, 3u);
     EXPECT_EQ(light->intensity, 1.0f);
     EXPECT_EQ(light->confidence, 1.0f);
-    const std::array<double, 3> d = internal::YaleBLightDirection(a, e);
+    const std::array<double, 3> d = YaleBLightDirection(a, e);
     for (int k = 0; k < 3; ++k) EXPECT_FLOAT_EQ(light->dominant_direction[k], d[k]) << frame;
     const double k1 = std::sqrt(3 / (4 * kPi));
     for (int c = 0; c < 3; ++c) {

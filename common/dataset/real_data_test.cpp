@@ -8,8 +8,8 @@
 
 #include "internal.h"
 #include "probeless/dataset/datasets.h"
+#include "probeless/dataset/yaleb.h"
 #include "testing_util.h"
-#include "yaleb.h"
 
 namespace probeless::dataset {
 namespace {
@@ -110,7 +110,7 @@ TEST(RealDataTest, YaleBSubject01) {
   // First the lowest azimuth: yaleB01_P00A-130E+20 (light from the subject's left, image right,
   // behind the face and above).
   const auto first = View<msgs::ShLight>(messages[2]);
-  const std::array<double, 3> expected = internal::YaleBLightDirection(-130, 20);
+  const std::array<double, 3> expected = YaleBLightDirection(-130, 20);
   for (int k = 0; k < 3; ++k) EXPECT_FLOAT_EQ(first->dominant_direction[k], expected[k]);
   EXPECT_GT(first->dominant_direction[0], 0.7f);   // image right
   EXPECT_LT(first->dominant_direction[1], -0.3f);  // above

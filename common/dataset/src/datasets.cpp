@@ -5,7 +5,7 @@
 #include <system_error>
 
 #include "internal.h"
-#include "yaleb.h"
+#include "probeless/dataset/yaleb.h"
 
 namespace probeless::dataset {
 
@@ -28,9 +28,8 @@ bool IsVideoFileName(const std::string& name) {
 
 bool HasYaleBImages(const std::string& dir) {
   const std::vector<std::string> files = internal::ListFiles(dir);
-  return std::any_of(files.begin(), files.end(), [](const std::string& name) {
-    return internal::ParseYaleBName(name).has_value();
-  });
+  return std::any_of(files.begin(), files.end(),
+                     [](const std::string& name) { return ParseYaleBName(name).has_value(); });
 }
 
 bool IsYaleBSubjectFolder(const std::string& name) {

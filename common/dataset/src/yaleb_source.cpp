@@ -11,11 +11,11 @@
 #include "camera_info_file.h"
 #include "image_io.h"
 #include "internal.h"
+#include "probeless/dataset/yaleb.h"
 #include "probeless/msgs/sh_light.h"
 #include "probeless/sh/sh.h"
-#include "yaleb.h"
 
-namespace probeless::dataset::internal {
+namespace probeless::dataset {
 
 namespace {
 
@@ -62,6 +62,8 @@ std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_d
   constexpr double kDeg = std::numbers::pi / 180;
   return sh::DirectionFromAzimuthElevation(azimuth_deg * kDeg, elevation_deg * kDeg);
 }
+
+namespace internal {
 
 namespace {
 
@@ -202,4 +204,5 @@ std::unique_ptr<Source> OpenYaleB(const std::string& path, const DatasetOptions&
   return std::make_unique<YaleBSource>(path, options, std::move(images), intrinsics, first.size());
 }
 
-}  // namespace probeless::dataset::internal
+}  // namespace internal
+}  // namespace probeless::dataset

@@ -5,7 +5,6 @@
 #include <charconv>
 #include <cmath>
 #include <filesystem>
-#include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <set>
@@ -34,31 +33,6 @@ std::string SubjectFolder(int subject) {
 }
 
 }  // namespace
-
-std::optional<YaleBName> ParseYaleBName(std::string_view name) {
-  // yaleBxx_P00A±aaaE±ee.pgm (24 characters)
-  if (name.size() != 24 || name.substr(0, 5) != "yaleB" || name.substr(7, 5) != "_P00A" ||
-      name[16] != 'E' || name.substr(20) != ".pgm") {
-    return std::nullopt;
-  }
-  const auto subject = Digits(name, 5, 2);
-  const auto azimuth = Digits(name, 13, 3);
-  const auto elevation = Digits(name, 18, 2);
-  if (!subject || !azimuth || !elevation) return std::nullopt;
-  if ((name[12] != '+' && name[12] != '-') || (name[17] != '+' && name[17] != '-')) {
-    return std::nullopt;
-  }
-  YaleBName out;
-  out.subject = *subject;
-  out.azimuth_deg = name[12] == '-' ? -*azimuth : *azimuth;
-  out.elevation_deg = name[17] == '-' ? -*elevation : *elevation;
-  return out;
-}
-
-std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_deg) {
-  constexpr double kDeg = std::numbers::pi / 180;
-  return sh::DirectionFromAzimuthElevation(azimuth_deg * kDeg, elevation_deg * kDeg);
-}
 
 std::vector<int> ListYaleBSubjects(const std::string& dir) {
   std::error_code error;

@@ -11,6 +11,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "probeless/dataset/yaleb.h"
 #include "probeless/raytrace/mesh.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/raytrace/scene.h"
@@ -412,13 +413,8 @@ std::vector<YaleBLightDirection> YaleBLightDirectionsFromFolder(const std::strin
   std::sort(names.begin(), names.end());
   std::vector<YaleBLightDirection> out;
   for (const std::string& n : names) {
-    // yaleBxx_P00A±aaaE±ee.pgm
-    int a = 0, e = 0;
-    char sa = 0, se = 0;
-    if (n.size() == 24 && n.starts_with("yaleB") && n.ends_with(".pgm") &&
-        std::sscanf(n.c_str() + 12, "%c%3dE%c%2d", &sa, &a, &se, &e) == 4 &&
-        (sa == '+' || sa == '-') && (se == '+' || se == '-')) {
-      out.push_back({sa == '-' ? -a : a, se == '-' ? -e : e});
+    if (const auto parsed = dataset::ParseYaleBName(n)) {
+      out.push_back({parsed->azimuth_deg, parsed->elevation_deg});
     }
   }
   return out;

@@ -10,22 +10,16 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/dataset/yaleb.h"
 #include "probeless/face_light/model.h"
 
 namespace probeless::face_light {
 
-struct YaleBName {
-  int subject = 0;
-  int azimuth_deg = 0;
-  int elevation_deg = 0;
-};
-
-// Parses "yaleBxx_P00A±aaaE±ee.pgm"; nullopt for any other name (ambient images, .info, ...).
-std::optional<YaleBName> ParseYaleBName(std::string_view file_name);
-
-// Unit direction towards the light in the light frame (model.h) for a Yale B azimuth and
-// elevation in degrees: (-sin A cos E, -sin E, -cos A cos E) (sh::DirectionFromAzimuthElevation).
-std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_deg);
+// File names and light directions: the dataset library's parser (probeless/dataset/yaleb.h).
+// YaleBLightDirection gives the unit direction towards the light in the light frame (model.h).
+using dataset::ParseYaleBName;
+using dataset::YaleBLightDirection;
+using dataset::YaleBName;
 
 // Subject numbers with a yaleBxx/ folder under `dir`, ascending. Throws FaceLightError if `dir`
 // is not a directory.

@@ -1,12 +1,13 @@
-// Private: Extended Yale Face Database B file names and light directions (the SH coefficients of
-// the light are probeless_sh's).
+// Extended Yale Face Database B (cropped) file names and light directions, the one parser of them
+// (the dataset source, the face-light training and evaluation, the Yale-B-style simulator use it;
+// the SH coefficients of the light are probeless_sh's).
 #pragma once
 
 #include <array>
 #include <optional>
 #include <string_view>
 
-namespace probeless::dataset::internal {
+namespace probeless::dataset {
 
 // What a file name "yaleBxx_P00A±aaaE±ee.pgm" says: subject xx, light azimuth and elevation in
 // degrees.
@@ -25,4 +26,4 @@ std::optional<YaleBName> ParseYaleBName(std::string_view file_name);
 // (-sin A cos E, -sin E, -cos A cos E).
 std::array<double, 3> YaleBLightDirection(double azimuth_deg, double elevation_deg);
 
-}  // namespace probeless::dataset::internal
+}  // namespace probeless::dataset
