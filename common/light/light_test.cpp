@@ -470,6 +470,156 @@ TEST(Estimate, ThinningTheBigBinsKeepsTheResult) {
   EXPECT_EQ(thin.pixels, t.width);
 }
 
+TEST(Normals, FilterDropsCreasesAndGrazingSurfaces) {
+  // Wall at 3 m over a floor 0.5 m below the camera: the crease row (the floor meets the wall at
+  // v = cy + 0.5 * fy / 3 = 79.5) and the floor near the horizon (seen at > 75 degrees) lose their
+  // normals, the middle of the wall and the near floor keep them.
+  const Scene scene(Shape::kFloor);
+  std::vector<float> n = scene.normals;
+  light::NormalFilterOptions o;
+  light::FilterNormals(scene.depth, scene.w, scene.h, scene.k, o, n);
+  auto has_normal = [&](int u, int v) {
+    const size_t p = static_cast<size_t>(v) * scene.w + u;
+    return n[3 * p] != 0 || n[3 * p + 1] != 0 || n[3 * p + 2] != 0;
+  };
+  EXPECT_TRUE(has_normal(80, 40));   // wall
+  EXPECT_TRUE(has_normal(80, 115));  // floor 1.1 m ahead, seen at ~66 degrees
+  EXPECT_FALSE(has_normal(80, 80));  // the crease
+  EXPECT_FALSE(has_normal(80, 84));  // floor ~3 m ahead, seen at ~80 degrees
+  EXPECT_FALSE(has_normal(1, 40));   // the image border (no neighbour)
+  // Depth stays; only the normals are dropped. Everything off = unchanged.
+  std::vector<float> same = scene.normals;
+  o.radius = 0;
+  o.max_view_angle_deg = 90;
+  light::FilterNormals(scene.depth, scene.w, scene.h, scene.k, o, same);
+  EXPECT_EQ(same, scene.normals);
+  EXPECT_EQ(
+      ErrorOf([&] { light::FilterNormals(scene.depth, scene.w, scene.h - 1, scene.k, o, same); }),
+      "light::FilterNormals: depth has 19200 values and normals 57600, expected 160x119 (x3)");
+}
+
+TEST(Estimate, ShRotationMatrixRotatesADirectionalLight) {
+  // A[k][n] = integral Y_k(d) Y_n(R d): the light of frame B (directions d_B = R d_A) maps back
+  // to frame A's coefficients.
+  const double a = 0.4;  // rotation about (0.6, 0, 0.8) by 0.4 rad (Rodrigues)
+  const double ax[3] = {0.6, 0, 0.8};
+  const double c = std::cos(a), s = std::sin(a);
+  float r[9];
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) {
+      const double cross[3][3] = {{0, -ax[2], ax[1]}, {ax[2], 0, -ax[0]}, {-ax[1], ax[0], 0}};
+      r[i * 3 + j] =
+          static_cast<float>((i == j ? c : 0) + (1 - c) * ax[i] * ax[j] + s * cross[i][j]);
+    }
+  }
+  const sh::Vec3 d{0.3, -0.8, -0.52};
+  const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  const sh::Vec3 da{d[0] / len, d[1] / len, d[2] / len};
+  const sh::Vec3 db{r[0] * da[0] + r[1] * da[1] + r[2] * da[2],
+                    r[3] * da[0] + r[4] * da[1] + r[5] * da[2],
+                    r[6] * da[0] + r[7] * da[1] + r[8] * da[2]};
+  const auto la = sh::DirectionalLight(da, 2.0, 4), lb = sh::DirectionalLight(db, 2.0, 4);
+  std::vector<double> m;
+  light::ShRotationMatrix(r, 4, &m);
+  double worst = 0;
+  for (int k = 0; k < 16; ++k) {
+    double v = 0;
+    for (int n = 0; n < 16; ++n) v += m[k * 16 + n] * lb[n];
+    worst = std::max(worst, std::abs(v - la[k]));
+  }
+  EXPECT_LT(worst, 2e-5);
+  EXPECT_EQ(ErrorOf([&] { light::ShRotationMatrix(r, 6, &m); }),
+            "light::ShRotationMatrix: bands must be 1..5, got 6");
+}
+
+// One frame of a synthetic stream: the GroupedScene surfaces (one grey material, normals facing
+// the camera) lit by a directional light `direction` (camera frame; power 0 = off) plus ambient,
+// intensities with Gaussian noise of `noise` (seeded).
+GroupedScene MakeNoisyFrame(const sh::Vec3& direction, double power, double noise, uint64_t seed) {
+  GroupedScene g = MakeGroupedScene(0.6, 0.6);
+  auto l = sh::DirectionalLight(direction, power, 4);
+  l[0] += 0.3;
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> gauss(0, noise);
+  const int cc = 16;
+  for (int i = 0; i < g.transfer.width; ++i) {
+    double shading = 0;
+    for (int k = 0; k < cc; ++k) shading += g.transfer.transfer[i * cc + k] * l[k];
+    g.intensity[i] = static_cast<float>(std::max(0.0, 0.6 * shading + gauss(rng)));
+  }
+  g.direction = direction;
+  g.colour.assign(g.colour.size(), 150);
+  return g;
+}
+
+TEST(Temporal, PoolsNoisyFramesAndFollowsASwitchWithinThreeFrames) {
+  const sh::Vec3 a{0.45, -0.6, -0.66}, b{-0.62, -0.55, -0.56};
+  auto unit = [](sh::Vec3 v) {
+    const double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    return sh::Vec3{v[0] / n, v[1] / n, v[2] / n};
+  };
+  const sh::Vec3 da = unit(a), db = unit(b);
+  light::EstimateOptions o;
+  o.stride = 1;
+  light::TemporalOptions t;
+  t.frames = 4;
+  t.forgetting = 0.5f;
+  light::TemporalLightEstimator pooled(t);
+  // Noisy frames under light a: the pooled error is below the single-frame one on average.
+  double single = 0, accumulated = 0;
+  const int frames = 8;
+  for (int f = 0; f < frames; ++f) {
+    const GroupedScene g = MakeNoisyFrame(da, 3.0, 0.25, 100 + f);
+    single += DirectionErrorDeg(light::EstimateLight(g.transfer, g.intensity, o, g.colour), da);
+    accumulated += DirectionErrorDeg(pooled.Estimate(g.transfer, g.intensity, o, g.colour), da);
+  }
+  std::printf("noisy frames: single %.2f deg, pooled over 4 frames %.2f deg (mean of %d)\n",
+              single / frames, accumulated / frames, frames);
+  EXPECT_LT(accumulated, 0.8 * single);
+  // The light jumps from a to b (less noise, so that one frame can tell): within three frames
+  // the estimate is at b.
+  double after[3];
+  for (int f = 0; f < 3; ++f) {
+    const GroupedScene g = MakeNoisyFrame(db, 3.0, 0.05, 200 + f);
+    after[f] = DirectionErrorDeg(pooled.Estimate(g.transfer, g.intensity, o, g.colour), db);
+  }
+  std::printf("after the switch a -> b: %.1f, %.1f, %.1f deg\n", after[0], after[1], after[2]);
+  EXPECT_LT(after[2], 5.0);
+  // Switched off: three frames of ambient only bring the directional power down to < 20 %.
+  const GroupedScene on = MakeNoisyFrame(db, 3.0, 0.0, 300);
+  const float power_on = pooled.Estimate(on.transfer, on.intensity, o, on.colour).intensity;
+  float power_off = 0;
+  for (int f = 0; f < 3; ++f) {
+    const GroupedScene g = MakeNoisyFrame(db, 0.0, 0.0, 400 + f);
+    power_off = pooled.Estimate(g.transfer, g.intensity, o, g.colour).intensity;
+  }
+  std::printf("directional power on %.3f, 3 frames after switching off %.3f\n", power_on,
+              power_off);
+  EXPECT_LT(power_off, 0.2f * power_on);
+  // A rotating camera: with the rotation the pooled rows stay consistent, the error small.
+  light::TemporalLightEstimator rotating(t);
+  const double step = 0.08;  // rad per frame about the camera's y axis
+  const float r[9] = {
+      static_cast<float>(std::cos(step)),  0, static_cast<float>(std::sin(step)), 0, 1, 0,
+      static_cast<float>(-std::sin(step)), 0, static_cast<float>(std::cos(step))};
+  sh::Vec3 d = da;
+  double last = 0;
+  for (int f = 0; f < 6; ++f) {
+    if (f > 0) {
+      d = {r[0] * d[0] + r[1] * d[1] + r[2] * d[2], r[3] * d[0] + r[4] * d[1] + r[5] * d[2],
+           r[6] * d[0] + r[7] * d[1] + r[8] * d[2]};
+    }
+    const GroupedScene g = MakeNoisyFrame(d, 3.0, 0.0, 500 + f);
+    last = DirectionErrorDeg(
+        rotating.Estimate(g.transfer, g.intensity, o, g.colour, f > 0 ? r : nullptr), d);
+  }
+  EXPECT_LT(last, 2.0);
+  EXPECT_EQ(ErrorOf([] {
+              light::TemporalLightEstimator bad({0, 0.5f});
+            }),
+            "light::TemporalLightEstimator: frames must be >= 1 and forgetting in [0, 1]");
+}
+
 TEST(Messages, GeometryBufferAndShLightRoundTrip) {
   // The node's gbuffer path: planes copied into a msgs::GeometryBuffer give the same transfer.
   const Scene scene(Shape::kValley);

@@ -16,11 +16,16 @@
 //   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
 //   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
 //   0 = one uniform albedo), max_rows_per_bin (100),
-//   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true).
+//   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true),
+//   gbuffer_normals ("fusion": G_r's normals; "depth": recomputed from G_r's depth, step
+//   max(2, w / 160)), normal_filter (false: light::FilterNormals on the normals), temporal_frames
+//   (1 = off; light::TemporalLightEstimator over that many frames, camera rotation not
+//   compensated), forgetting (0.5), temporal_reset_ratio (1.3).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
 
+#include <algorithm>
 #include <optional>
 #include <string>
 #include <vector>
@@ -59,7 +64,18 @@ int Run(int argc, char** argv) {
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
   const bool publish_transfer = node.Param("publish_transfer", true);
-  light::TransferComputer computer(to);  // throws LightError for bad options
+  const std::string gbuffer_normals = node.Param("gbuffer_normals", "fusion");
+  if (gbuffer_normals != "fusion" && gbuffer_normals != "depth") {
+    throw node::UsageError("scene_light: gbuffer_normals must be fusion or depth, got '" +
+                           gbuffer_normals + "'");
+  }
+  const bool normal_filter = node.Param("normal_filter", false);
+  light::TemporalOptions tmo;
+  tmo.frames = node.Param("temporal_frames", 1);
+  tmo.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
+  tmo.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
+  light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
+  light::TransferComputer computer(to);         // throws LightError for bad options
 
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
   bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
@@ -90,6 +106,19 @@ int Run(int argc, char** argv) {
       }
       header = g->header;
       view = light::ViewOfGeometryBuffer(*g, g.payload, *info);
+      if (gbuffer_normals == "depth" || normal_filter) {
+        depth.assign(view.depth.begin(), view.depth.end());
+        if (gbuffer_normals == "depth") {
+          // Central differences max(2, w / 160) pixels apart on G_r's depth (already denoised by
+          // the merge: no smoothing), as scene_light_eval --fused-normal-step 4 at 640 x 480.
+          light::NormalsFromDepth(depth, view.width, view.height, view.intrinsics, &normals, 0.05f,
+                                  std::max(2, view.width / 160));
+        } else {
+          normals.assign(view.normals.begin(), view.normals.end());
+        }
+        view.depth = depth;
+        view.normals = normals;
+      }
     } else {
       const auto d = msgs::ReadMessage<msgs::Image>(sample.data());
       if (!info || !image) {
@@ -106,6 +135,10 @@ int Run(int argc, char** argv) {
               normals,
               {}};
     }
+    if (normal_filter) {
+      // view.normals is `normals` here (the depth mode, or copied above).
+      light::FilterNormals(view.depth, view.width, view.height, view.intrinsics, {}, normals);
+    }
     const auto img = msgs::ReadMessage<msgs::Image>(image->data());
     if (img->header.sequence != header.sequence) {
       node.Debug() << "image sequence " << img->header.sequence << " used for frame "
@@ -113,7 +146,8 @@ int Run(int argc, char** argv) {
     }
     light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
     computer.Compute(view, {}, nullptr, &result);
-    const light::LightEstimate e = light::EstimateLight(result, grey, eo, rgb);
+    const light::LightEstimate e = tmo.frames > 1 ? temporal.Estimate(result, grey, eo, rgb)
+                                                  : light::EstimateLight(result, grey, eo, rgb);
     ++frames;
     if (e.valid) {
       bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));

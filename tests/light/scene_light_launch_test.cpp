@@ -14,6 +14,7 @@
 #include <map>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
@@ -95,10 +96,11 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
   }
 }
 
-TEST(SceneLightLaunch, BadModeIsAOneLineError) {
-  const std::string err = "/tmp/scene_light_mode_" + std::to_string(getpid()) + ".txt";
-  const std::string command = std::string(PROBELESS_BIN_DIR) +
-                              "/scene_light --ros-args -p mode:=lidar < /dev/null 2> " + err;
+// Runs scene_light with `params` (ros-args) and returns its exit status and stderr.
+std::pair<int, std::string> RunSceneLight(const std::string& params) {
+  const std::string err = "/tmp/scene_light_params_" + std::to_string(getpid()) + ".txt";
+  const std::string command = std::string(PROBELESS_BIN_DIR) + "/scene_light --ros-args " + params +
+                              " < /dev/null 2> " + err;
   const int status = std::system(command.c_str());
   std::string log;
   if (FILE* f = std::fopen(err.c_str(), "r")) {
@@ -108,8 +110,18 @@ TEST(SceneLightLaunch, BadModeIsAOneLineError) {
     std::fclose(f);
   }
   std::remove(err.c_str());
+  return {status, log};
+}
+
+TEST(SceneLightLaunch, BadModeIsAOneLineError) {
+  const auto [status, log] = RunSceneLight("-p mode:=lidar");
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2);
   EXPECT_EQ(log, "[error] [scene_light] scene_light: mode must be gbuffer or depth, got 'lidar'\n");
+  const auto [status2, log2] = RunSceneLight("-p gbuffer_normals:=volume");
+  EXPECT_TRUE(WIFEXITED(status2) && WEXITSTATUS(status2) == 2);
+  EXPECT_EQ(log2,
+            "[error] [scene_light] scene_light: gbuffer_normals must be fusion or depth, got "
+            "'volume'\n");
 }
 
 }  // namespace

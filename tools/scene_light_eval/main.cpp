@@ -2,7 +2,7 @@
 //
 //   scene_light_eval [--sim SCENARIO.yaml | --log FILE.mcap] --json OUT [--plots DIR]
 //                    [--frames N] [--directions N] [--bands B] [--aux] [--threads T]
-//                    [--camera-truth] [--grey-world] [--quadrature]
+//                    [--camera-truth] [--grey-world] [--quadrature] [--fused] [--mix] ...
 //
 // --sim (default data/scenarios/room_dynamic.yaml): N frames (default 12) spread evenly over the
 // scenario are rendered in-process; each variant runs on the noise-free render (depth, normals,
@@ -24,6 +24,19 @@
 // frame at the stream's resolution with --threads workers (default 2): wall ms, process CPU ms of
 // the transfer (all threads) and thread CPU ms of the estimate. Output: one JSON object; plots as
 // PNG (lat-long maps, error over time, estimated and true direction over time).
+//
+// Real-like input (--sim): `geometry_vs_clean` (coverage of the rendered surface, normal error
+// against the rendered normals) for the sensor and fused G-buffers. --fused also runs every
+// --fused-step-th frame (default 1) through recon::FusionPipeline as launch/demo_scene.yaml's
+// fusion node does (6 m volume, 256^3, ICP tracking; --fused-known-pose: the simulator's pose)
+// and scores the variants on its G_r (merged depth + normals, the image's colour) -> `fused`;
+// --fused-volume uses G_v (the TSDF raycast) instead, --fused-normal-step S recomputes the
+// normals from G_r's depth. --mix scores hybrids of clean and sensor inputs (which sensor effect
+// costs what; printed). Estimator switches: --normal-filter (light::FilterNormals; --filter-radius,
+// --filter-angle, --filter-view, --filter-jump), --temporal N / --forgetting F
+// (light::TemporalLightEstimator fed with the N - 1 frames before each evaluated one, camera
+// rotation from the simulator), --smooth-radius / --normal-step (normals of the sensor depth),
+// --no-balance.
 #include "probeless/node/main.h"
 
 #include <time.h>
@@ -49,6 +62,7 @@
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/recon/pipeline.h"
 #include "probeless/replay/sources.h"
 #include "probeless/sh/sh.h"
 #include "probeless/sim/scenario.h"
@@ -69,9 +83,24 @@ struct Options {
   int bands = 4;
   int threads = 2;
   bool aux = false;
-  bool camera_truth = false;  // --camera-truth: score against the light at the camera
-  bool grey_world = false;    // --grey-world: one uniform albedo (no chromaticity groups)
-  bool quadrature = false;    // --quadrature: eq. 6 as printed (no analytic unoccluded part)
+  bool camera_truth = false;      // --camera-truth: score against the light at the camera
+  bool grey_world = false;        // --grey-world: one uniform albedo (no chromaticity groups)
+  bool quadrature = false;        // --quadrature: eq. 6 as printed (no analytic unoccluded part)
+  bool fused = false;             // --fused: also run on fusion's G_r (in-process FusionPipeline)
+  bool fused_known_pose = false;  // --fused-known-pose: the simulator's pose instead of ICP
+  int fused_step = 1;             // --fused-step S: integrate every S-th frame
+  // Normal filter on sensor and fused G-buffers (light::FilterNormals): --normal-filter,
+  // --filter-radius R, --filter-angle DEG, --filter-view DEG, --filter-jump REL.
+  bool normal_filter = false;
+  light::NormalFilterOptions filter;
+  int smooth_radius = -1;  // --smooth-radius R: sensor depth smoothing (-1: GeometryFromSimFrame's)
+  int normal_step = -1;    // --normal-step S: NormalsFromDepth step (-1: GeometryFromSimFrame's)
+  bool fused_volume = false;  // --fused-volume: G_v (the TSDF raycast, depth and normals) not G_r
+  int fused_normal_step = 0;  // --fused-normal-step S: normals from G_r's depth (0: fusion's)
+  int temporal = 1;           // --temporal N: TemporalLightEstimator over N consecutive frames
+  float forgetting = 0.5f;    // --forgetting F
+  bool no_balance = false;    // --no-balance: no normal-orientation balancing (ablation)
+  bool mix = false;  // --mix: hybrids of clean and sensor inputs (which sensor effect costs what)
 };
 
 // One evaluated frame of one variant.
@@ -140,9 +169,19 @@ struct Variant {
   light::TransferComputer computer;
   light::EstimateOptions estimate;
   light::TransferResult result;  // reused across frames, as the node does
-  Series clean, noisy;
-  Variant(const light::TransferOptions& o, const light::EstimateOptions& e)
-      : computer(o), estimate(e) {}
+  Series clean, noisy, fused;
+  std::array<Series, 7> mix;  // --mix: clean geometry + sensor colour; sensor geometry + clean
+                              // colour; clean normals and depth where the sensor has depth;
+                              // sensor depth + clean normals; clean depth + sensor normals
+  // --temporal: one accumulator per input (clean, sensor, fused), fed with the frames before each
+  // evaluated one.
+  std::array<light::TemporalLightEstimator, 3> temporal;
+  Variant(const light::TransferOptions& o, const light::EstimateOptions& e,
+          const light::TemporalOptions& t)
+      : computer(o),
+        estimate(e),
+        temporal{light::TemporalLightEstimator(t), light::TemporalLightEstimator(t),
+                 light::TemporalLightEstimator(t)} {}
 };
 
 double CpuMs() {
@@ -157,11 +196,42 @@ double ThreadCpuMs() {
   return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
+// Geometry error of a G-buffer against the noise-free render of the same frame: the share of the
+// rendered surface pixels it covers, the median and p90 angle between its normals and the rendered
+// ones (pixels both have) and the median |depth difference| (m).
+struct GeometryError {
+  double coverage = 0, normal_deg_median = NAN, normal_deg_p90 = NAN, depth_m_median = NAN;
+};
+
+GeometryError CompareGeometry(const light::GeometryView& g, const light::GeometryView& clean) {
+  GeometryError e;
+  std::vector<double> angles, depths;
+  size_t surface = 0, covered = 0;
+  for (size_t i = 0; i < clean.depth.size(); i += 3) {
+    if (clean.depth[i] <= 0) continue;
+    ++surface;
+    const float* n = &g.normals[3 * i];
+    if (g.depth[i] <= 0 || (n[0] == 0 && n[1] == 0 && n[2] == 0)) continue;
+    ++covered;
+    const float* c = &clean.normals[3 * i];
+    const double dot = n[0] * c[0] + n[1] * c[1] + n[2] * c[2];
+    angles.push_back(std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi);
+    depths.push_back(std::abs(g.depth[i] - clean.depth[i]));
+  }
+  e.coverage = surface > 0 ? static_cast<double>(covered) / surface : 0;
+  e.normal_deg_median = Quantile(angles, 0.5);
+  e.normal_deg_p90 = Quantile(angles, 0.9);
+  e.depth_m_median = Quantile(depths, 0.5);
+  return e;
+}
+
 // Runs one variant on one frame and scores it against the ground truth.
 Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float> grey,
                 std::span<const uint8_t> colour, const light::AuxiliaryBuffers& aux,
                 const msgs::ShLight& truth, double time_s,
-                const msgs::ShLight* camera_truth = nullptr) {
+                const msgs::ShLight* camera_truth = nullptr,
+                light::TemporalLightEstimator* temporal = nullptr,
+                const float* rotation = nullptr) {
   Sample s;
   s.time_s = time_s;
   light::TransferResult& t = v.result;
@@ -171,7 +241,9 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
   const auto t1 = Clock::now();
   s.cpu_ms_transfer = CpuMs() - c0;
   const double c1 = ThreadCpuMs();
-  const light::LightEstimate e = light::EstimateLight(t, grey, v.estimate, colour);
+  const light::LightEstimate e = temporal != nullptr
+                                     ? temporal->Estimate(t, grey, v.estimate, colour, rotation)
+                                     : light::EstimateLight(t, grey, v.estimate, colour);
   s.cpu_ms_estimate = ThreadCpuMs() - c1;
   const auto t2 = Clock::now();
   s.ms_transfer = std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -360,11 +432,45 @@ int Run(int argc, char** argv) {
       o.grey_world = true;
     else if (a == "--quadrature")
       o.quadrature = true;
+    else if (a == "--fused")
+      o.fused = true;
+    else if (a == "--fused-known-pose")
+      o.fused = o.fused_known_pose = true;
+    else if (a == "--normal-filter")
+      o.normal_filter = true;
+    else if (a == "--filter-radius")
+      o.filter.radius = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--filter-angle")
+      o.filter.max_neighbour_angle_deg = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--filter-view")
+      o.filter.max_view_angle_deg = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--filter-jump")
+      o.filter.max_plane_distance_rel = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--smooth-radius")
+      o.smooth_radius = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--normal-step")
+      o.normal_step = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-volume")
+      o.fused = o.fused_volume = true;
+    else if (a == "--fused-normal-step")
+      o.fused_normal_step = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--temporal")
+      o.temporal = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--forgetting")
+      o.forgetting = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--no-balance")
+      o.no_balance = true;
+    else if (a == "--mix")
+      o.mix = true;
+    else if (a == "--fused-step")
+      o.fused_step = static_cast<int>(node::ParseNumberOption(a, value()));
     else
       throw node::UsageError("unknown option '" + a + "'");
   }
   if (o.json.empty()) throw node::UsageError("--json OUT is required");
   if (o.frames < 1) throw node::UsageError("--frames must be >= 1");
+  if (o.fused_step < 1) throw node::UsageError("--fused-step must be >= 1");
+  if (o.fused && !o.log.empty()) throw node::UsageError("--fused needs --sim");
   light::TransferOptions full_o;
   full_o.directions = o.directions;
   full_o.bands = o.bands;
@@ -374,7 +480,12 @@ int Run(int argc, char** argv) {
   fast_o.subsample = 4;
   light::EstimateOptions eo;
   if (o.grey_world) eo.albedo_groups = 0;
-  Variant full(full_o, eo), fast(fast_o, eo);
+  if (o.no_balance) eo.balance_normals = false;
+  light::TemporalOptions to;
+  to.frames = o.temporal;
+  to.forgetting = o.forgetting;
+  Variant full(full_o, eo, to), fast(fast_o, eo, to);
+  std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
   const auto start = Clock::now();
   std::string source_name;
   if (o.log.empty()) {
@@ -384,9 +495,176 @@ int Run(int argc, char** argv) {
     sim::Simulator simulator(sim::LoadScenario(path), o.threads);
     const uint64_t total = simulator.scenario().frames;
     const int count = static_cast<int>(std::min<uint64_t>(o.frames, total));
+    // --fused: every fused_step-th frame up to the last evaluated one goes through the
+    // reconstruction as in the fusion node of launch/demo_scene.yaml (depth in metres, grey
+    // guidance, ICP or the known pose; 6 m volume at (-3, -3, 0.3), mu 0.08 m, depth <= 6 m); each
+    // evaluated frame is integrated too and then also runs on G_r (the merged depth and normals).
+    std::optional<recon::FusionPipeline> fusion;
+    recon::FrameResult last_fusion;
+    uint64_t next_fused = 0;
+    recon::Pose first_pose_inverse;
+    if (o.fused) {
+      recon::FusionOptions fo;
+      fo.volume.size_m = 6.0f;
+      fo.volume.origin = {-3.0f, -3.0f, 0.3f};
+      fo.volume.truncation_m = 0.08f;
+      fo.preprocess.depth_max_m = 6.0f;
+      fo.threads = o.threads;
+      fusion.emplace(fo);
+    }
+    auto to_recon_pose = [](const raytrace::Transform& t) {
+      recon::Pose p;
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) p.r[r * 3 + c] = t.rotation.m[r][c];
+        p.t[r] = t.translation[r];
+      }
+      return p;
+    };
+    auto integrate = [&](const sim::SimFrame& f) {
+      const int w = f.render.width, h = f.render.height;
+      recon::DepthImage depth;
+      depth.Resize(w, h);
+      for (size_t i = 0; i < depth.data.size(); ++i) {
+        const float z = f.depth_mm[i] * 0.001f;
+        depth.data[i] = z >= 0.3f && z <= 6.0f ? z : 0.0f;
+      }
+      recon::GreyImage grey;
+      grey.Resize(w, h);
+      for (size_t i = 0; i < grey.data.size(); ++i) {
+        grey.data[i] = static_cast<uint8_t>(
+            (f.rgb[3 * i] * 299 + f.rgb[3 * i + 1] * 587 + f.rgb[3 * i + 2] * 114) / 1000);
+      }
+      const recon::Intrinsics k{w,
+                                h,
+                                static_cast<float>(f.camera.fx),
+                                static_cast<float>(f.camera.fy),
+                                static_cast<float>(f.camera.cx),
+                                static_cast<float>(f.camera.cy)};
+      const recon::Pose c2w = to_recon_pose(f.camera.camera_to_world);
+      if (f.index == 0) first_pose_inverse = c2w.Inverse();
+      const recon::Pose known = first_pose_inverse * c2w;
+      last_fusion = fusion->Process(depth, k, &grey, o.fused_known_pose ? &known : nullptr);
+    };
+    auto sensor_geometry_of = [&](const sim::SimFrame& frame) {
+      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true);
+      if (o.smooth_radius >= 0 || o.normal_step >= 0) {
+        for (size_t i = 0; i < g.depth.size(); ++i) g.depth[i] = frame.depth_mm[i] * 0.001f;
+        const int radius = o.smooth_radius >= 0 ? o.smooth_radius : std::max(1, g.width / 80);
+        if (radius > 0) light::SmoothDepth(g.depth, g.width, g.height, radius);
+        light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
+                                o.normal_step > 0 ? o.normal_step : std::max(2, g.width / 160));
+      }
+      if (o.normal_filter) {
+        light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
+      }
+      return g;
+    };
+    // G_r of the last integrated frame as scene_light receives it in gbuffer mode: the merged
+    // depth and its normals, with the camera image's grey and colour.
+    auto fused_geometry_of = [&](const sim::SimFrame& frame) {
+      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true);
+      const auto& d = fusion->merged().denoised;
+      const auto& n = fusion->merged_normals();
+      g.depth.assign(d.data.begin(), d.data.end());
+      g.normals.resize(3 * n.data.size());
+      for (size_t i = 0; i < n.data.size(); ++i) {
+        g.normals[3 * i] = n.data[i].x;
+        g.normals[3 * i + 1] = n.data[i].y;
+        g.normals[3 * i + 2] = n.data[i].z;
+      }
+      if (o.fused_volume) {
+        // G_v: the volume raycast at the tracking level (nearest-upsampled to the input size).
+        const auto& vv = fusion->volume_view();
+        const int sx = std::max(1, g.width / std::max(1, vv.normals.width));
+        for (int y = 0; y < g.height; ++y) {
+          for (int x = 0; x < g.width; ++x) {
+            const size_t p = static_cast<size_t>(y) * g.width + x;
+            const int lx = std::min(vv.normals.width - 1, x / sx),
+                      ly = std::min(vv.normals.height - 1, y / sx);
+            const auto nv = vv.normals.At(lx, ly);
+            const float z = vv.depth.At(lx, ly);
+            g.depth[p] = z;
+            g.normals[3 * p] = z > 0 ? nv.x : 0;
+            g.normals[3 * p + 1] = z > 0 ? nv.y : 0;
+            g.normals[3 * p + 2] = z > 0 ? nv.z : 0;
+          }
+        }
+      }
+      if (o.fused_normal_step > 0) {
+        if (o.smooth_radius > 0) light::SmoothDepth(g.depth, g.width, g.height, o.smooth_radius);
+        light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
+                                o.fused_normal_step);
+      }
+      if (o.normal_filter) {
+        light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
+      }
+      return g;
+    };
+    // --temporal: the camera rotation from the previous fed frame (d_now = R d_prev); a frame
+    // that does not follow the previous one resets the accumulators.
+    int64_t last_fed = -2;
+    raytrace::Mat3 last_c2w;
+    float rotation[9];
+    auto advance = [&](const sim::SimFrame& frame) -> const float* {
+      const raytrace::Mat3& r = frame.camera.camera_to_world.rotation;
+      const bool follows = static_cast<int64_t>(frame.index) == last_fed + 1;
+      if (!follows) {
+        for (Variant* v : {&full, &fast}) {
+          for (auto& t : v->temporal) t.Reset();
+        }
+      }
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 3; ++b) {
+          double x = 0;
+          for (int c = 0; c < 3; ++c) x += r.m[c][a] * last_c2w.m[c][b];  // R_now^T R_prev
+          rotation[a * 3 + b] = static_cast<float>(x);
+        }
+      }
+      last_fed = static_cast<int64_t>(frame.index);
+      last_c2w = r;
+      return follows ? rotation : nullptr;
+    };
+    // Feeds a frame before an evaluated one to the accumulators (not scored).
+    auto feed = [&](const sim::SimFrame& frame) {
+      const float* rot = advance(frame);
+      const light::GeometryStorage clean = light::GeometryFromSimFrame(frame, false);
+      const light::GeometryStorage sensor = sensor_geometry_of(frame);
+      std::optional<light::GeometryStorage> fused;
+      if (fusion) fused = fused_geometry_of(frame);
+      for (Variant* v : {&full, &fast}) {
+        const light::GeometryStorage* inputs[3] = {&clean, &sensor, fused ? &*fused : nullptr};
+        for (int j = 0; j < 3; ++j) {
+          if (inputs[j] == nullptr) continue;
+          v->computer.Compute(inputs[j]->View(), {}, nullptr, &v->result);
+          v->temporal[j].Estimate(v->result, inputs[j]->grey, v->estimate, inputs[j]->colour, rot);
+        }
+      }
+    };
+    int fused_lost = 0;
     for (int k = 0; k < count; ++k) {
       const uint64_t index = static_cast<uint64_t>(k) * total / count;
+      if (fusion) {
+        for (; next_fused < index; next_fused += o.fused_step) {
+          const sim::SimFrame fr = simulator.Render(next_fused);
+          integrate(fr);
+          if (last_fusion.state == recon::TrackingState::kLost) ++fused_lost;
+          if (o.temporal > 1 && next_fused + o.temporal > index) feed(fr);
+        }
+      } else if (o.temporal > 1) {
+        const uint64_t first =
+            index >= static_cast<uint64_t>(o.temporal - 1) ? index - o.temporal + 1 : 0;
+        for (uint64_t j = first; j < index; ++j) feed(simulator.Render(j));
+      }
       const sim::SimFrame f = simulator.Render(index);
+      const float* rot = o.temporal > 1 ? advance(f) : nullptr;
+      auto temporal_of = [&](Variant* v, int j) {
+        return o.temporal > 1 ? &v->temporal[j] : nullptr;
+      };
+      if (fusion) {
+        integrate(f);
+        if (last_fusion.state == recon::TrackingState::kLost) ++fused_lost;
+        if (next_fused == index) next_fused += o.fused_step;
+      }
       auto to_msg = [](const raytrace::LightingGroundTruth& l) {
         msgs::ShLight m;
         for (int n = 0; n < 9; ++n) {
@@ -404,18 +682,94 @@ int Run(int argc, char** argv) {
           o.camera_truth ? camera_truth : to_msg(light::SurfaceLightingTruth(simulator.scene(), f));
       light::AuxiliaryStorage aux;
       if (o.aux) aux = light::RenderAuxiliaryViews(simulator.scene(), f.camera, {});
+      const light::GeometryStorage clean_g = light::GeometryFromSimFrame(f, false);
+      if (o.mix) {
+        const light::GeometryStorage noisy_g = sensor_geometry_of(f);
+        light::GeometryStorage m0 = clean_g, m1 = noisy_g, m2 = clean_g;
+        m0.grey = noisy_g.grey;
+        m0.colour = noisy_g.colour;
+        m1.grey = clean_g.grey;
+        m1.colour = clean_g.colour;
+        for (size_t i = 0; i < m2.depth.size(); ++i) {
+          if (noisy_g.depth[i] <= 0) {
+            m2.depth[i] = 0;
+            m2.normals[3 * i] = m2.normals[3 * i + 1] = m2.normals[3 * i + 2] = 0;
+          }
+        }
+        light::GeometryStorage m3 = noisy_g, m4 = noisy_g;
+        m3.grey = m4.grey = clean_g.grey;
+        m3.colour = m4.colour = clean_g.colour;
+        for (size_t i = 0; i < m3.depth.size(); ++i) {
+          if (noisy_g.depth[i] <= 0 || clean_g.depth[i] <= 0) continue;
+          for (int c = 0; c < 3; ++c) m3.normals[3 * i + c] = clean_g.normals[3 * i + c];
+          m4.depth[i] = clean_g.depth[i];
+        }
+        // Oracles: the sensor's normals only where within 5 degrees of the clean ones; the
+        // clean normals only where the sensor's normals are kept (the same pixels).
+        light::GeometryStorage m5 = m1, m6 = m1;
+        for (size_t i = 0; i < m5.depth.size(); ++i) {
+          const float* a = &noisy_g.normals[3 * i];
+          const float* c = &clean_g.normals[3 * i];
+          const bool keep = a[0] * c[0] + a[1] * c[1] + a[2] * c[2] > std::cos(5 * 3.14159f / 180);
+          for (int q = 0; q < 3; ++q) {
+            if (!keep) m5.normals[3 * i + q] = 0;
+            m6.normals[3 * i + q] = keep ? c[q] : 0;
+          }
+        }
+        const light::GeometryStorage* ms[7] = {&m0, &m1, &m2, &m3, &m4, &m5, &m6};
+        for (int j = 0; j < 7; ++j) {
+          for (Variant* v : {&full, &fast}) {
+            v->mix[j].samples.push_back(RunFrame(*v, ms[j]->View(), ms[j]->grey, ms[j]->colour,
+                                                 aux.buffers, truth, f.time_s, &camera_truth));
+          }
+        }
+      }
       for (bool sensor : {false, true}) {
-        const light::GeometryStorage g = light::GeometryFromSimFrame(f, sensor);
+        const light::GeometryStorage g = sensor ? sensor_geometry_of(f) : clean_g;
+        if (sensor) sensor_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
         for (Variant* v : {&full, &fast}) {
           (sensor ? v->noisy : v->clean)
               .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
-                                          f.time_s, &camera_truth));
+                                          f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
+                                          rot));
         }
       }
-      std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg\n",
+      if (fusion) {
+        const light::GeometryStorage g = fused_geometry_of(f);
+        fused_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
+        for (Variant* v : {&full, &fast}) {
+          v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
+                                              f.time_s, &camera_truth, temporal_of(v, 2), rot));
+        }
+      }
+      std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg; sensor %.1f / %.1f",
                    static_cast<unsigned long long>(index), k + 1, count,
-                   full.clean.samples.back().dir_error_deg,
-                   fast.clean.samples.back().dir_error_deg);
+                   full.clean.samples.back().dir_error_deg, fast.clean.samples.back().dir_error_deg,
+                   full.noisy.samples.back().dir_error_deg,
+                   fast.noisy.samples.back().dir_error_deg);
+      if (fusion) {
+        std::fprintf(stderr, "; fused %.1f / %.1f (lost %d)",
+                     full.fused.samples.back().dir_error_deg,
+                     fast.fused.samples.back().dir_error_deg, fused_lost);
+      }
+      {
+        const Sample& c = full.clean.samples.back();
+        const Sample& n = full.noisy.samples.back();
+        std::fprintf(
+            stderr,
+            "\n  direction truth (%.2f %.2f %.2f) clean (%.2f %.2f %.2f) sensor (%.2f %.2f %.2f)",
+            c.truth_dir[0], c.truth_dir[1], c.truth_dir[2], c.estimate_dir[0], c.estimate_dir[1],
+            c.estimate_dir[2], n.estimate_dir[0], n.estimate_dir[1], n.estimate_dir[2]);
+      }
+      std::fprintf(stderr,
+                   "\n  normals vs clean, median / p90 deg (coverage): sensor %.1f / %.1f (%.2f)",
+                   sensor_geometry.back().normal_deg_median, sensor_geometry.back().normal_deg_p90,
+                   sensor_geometry.back().coverage);
+      if (fusion) {
+        std::fprintf(stderr, ", fused %.1f / %.1f (%.2f)", fused_geometry.back().normal_deg_median,
+                     fused_geometry.back().normal_deg_p90, fused_geometry.back().coverage);
+      }
+      std::fprintf(stderr, "\n");
     }
   } else {
     source_name = o.log;
@@ -482,14 +836,59 @@ int Run(int argc, char** argv) {
       << ",\n  \"albedo_groups\": " << eo.albedo_groups
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")
       << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin
+      << ",\n  \"temporal_frames\": " << o.temporal << ",\n  \"forgetting\": " << Num(o.forgetting)
+      << ",\n  \"normal_filter\": "
+      << (o.normal_filter
+              ? "{\"radius\": " + std::to_string(o.filter.radius) +
+                    ", \"max_neighbour_angle_deg\": " + Num(o.filter.max_neighbour_angle_deg) +
+                    ", \"max_view_angle_deg\": " + Num(o.filter.max_view_angle_deg) +
+                    ", \"max_plane_distance_rel\": " + Num(o.filter.max_plane_distance_rel) + "}"
+              : std::string("null"))
       << ",\n  \"full\": " << SeriesJson(full.clean) << ",\n  \"fast\": " << SeriesJson(fast.clean)
       << ",\n  \"with_sensor_noise\": {\"full\": " << SeriesJson(full.noisy)
-      << ", \"fast\": " << SeriesJson(fast.noisy) << "},\n  \"seconds\": " << Num(seconds)
-      << "\n}\n";
+      << ", \"fast\": " << SeriesJson(fast.noisy) << "}";
+  auto geometry_json = [](const std::vector<GeometryError>& v) {
+    std::vector<double> cov, med, p90, dep;
+    for (const auto& x : v) {
+      cov.push_back(x.coverage);
+      med.push_back(x.normal_deg_median);
+      p90.push_back(x.normal_deg_p90);
+      dep.push_back(x.depth_m_median);
+    }
+    return "{\"coverage_median\": " + Num(Quantile(cov, 0.5)) +
+           ", \"normal_error_deg_median\": " + Num(Quantile(med, 0.5)) +
+           ", \"normal_error_deg_p90_median\": " + Num(Quantile(p90, 0.5)) +
+           ", \"depth_error_m_median\": " + Num(Quantile(dep, 0.5)) + "}";
+  };
+  if (!sensor_geometry.empty()) {
+    out << ",\n  \"geometry_vs_clean\": {\"sensor\": " << geometry_json(sensor_geometry);
+    if (!fused_geometry.empty()) out << ", \"fused\": " << geometry_json(fused_geometry);
+    out << "}";
+  }
+  if (o.fused) {
+    out << ",\n  \"fused\": {\"known_pose\": " << (o.fused_known_pose ? "true" : "false")
+        << ", \"step\": " << o.fused_step << ", \"full\": " << SeriesJson(full.fused)
+        << ", \"fast\": " << SeriesJson(fast.fused) << "}";
+  }
+  out << ",\n  \"seconds\": " << Num(seconds) << "\n}\n";
   if (!o.plots.empty()) WritePlots(o.plots, full.clean, fast.clean);
   std::printf("full %s\nfast %s\nwith sensor noise: full %s\n                   fast %s\n",
               SeriesJson(full.clean).c_str(), SeriesJson(fast.clean).c_str(),
               SeriesJson(full.noisy).c_str(), SeriesJson(fast.noisy).c_str());
+  if (o.mix) {
+    const char* names[7] = {"clean geometry + sensor colour", "sensor geometry + clean colour",
+                            "clean geometry, sensor holes",   "sensor depth + clean normals",
+                            "clean depth + sensor normals",   "sensor normals within 5 deg",
+                            "clean normals at those pixels"};
+    for (int j = 0; j < 7; ++j) {
+      std::printf("mix %s: full %s\n    fast %s\n", names[j], SeriesJson(full.mix[j]).c_str(),
+                  SeriesJson(fast.mix[j]).c_str());
+    }
+  }
+  if (o.fused) {
+    std::printf("fused (G_r): full %s\n             fast %s\n", SeriesJson(full.fused).c_str(),
+                SeriesJson(fast.fused).c_str());
+  }
   return 0;
 }
 

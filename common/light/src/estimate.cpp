@@ -347,38 +347,46 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   return e;
 }
 
-LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
-                            const EstimateOptions& options, std::span<const uint8_t> colour) {
+namespace {
+
+// EstimateLight's rows: every stride-th valid pixel (or sparse sample) with a usable intensity,
+// targets I / albedo, and the linear colour per row when grouped. `what` prefixes the errors.
+struct LightRows {
+  int coefficient_count = 0;
+  std::vector<float> rows, targets, rgb;
+};
+
+LightRows SelectRows(const TransferResult& transfer, std::span<const float> intensity,
+                     const EstimateOptions& options, std::span<const uint8_t> colour,
+                     const std::string& what) {
   const size_t pixels = static_cast<size_t>(transfer.width) * transfer.height;
   if (intensity.size() != pixels) {
-    throw LightError("light::EstimateLight: intensity has " + std::to_string(intensity.size()) +
+    throw LightError(what + ": intensity has " + std::to_string(intensity.size()) +
                      " values, transfer is " + std::to_string(transfer.width) + "x" +
                      std::to_string(transfer.height));
   }
   const int cc = transfer.coefficient_count;
   if (transfer.transfer.size() != pixels * cc || transfer.valid.size() != pixels) {
-    throw LightError("light::EstimateLight: transfer buffer sizes do not match " +
+    throw LightError(what + ": transfer buffer sizes do not match " +
                      std::to_string(transfer.width) + "x" + std::to_string(transfer.height));
   }
-  if (options.stride < 1) throw LightError("light::EstimateLight: stride must be >= 1");
+  if (options.stride < 1) throw LightError(what + ": stride must be >= 1");
   const int cc_out = options.bands == 0 ? cc : options.bands * options.bands;
   if (options.bands != 0 && (options.bands < 2 || cc_out > cc)) {
-    throw LightError("light::EstimateLight: bands must be 0 or 2.." +
+    throw LightError(what + ": bands must be 0 or 2.." +
                      std::to_string(static_cast<int>(std::lround(std::sqrt(cc)))) + ", got " +
                      std::to_string(options.bands));
   }
-  if (!(options.albedo > 0)) throw LightError("light::EstimateLight: albedo must be > 0");
+  if (!(options.albedo > 0)) throw LightError(what + ": albedo must be > 0");
   if (!colour.empty() && colour.size() != 3 * pixels) {
-    throw LightError("light::EstimateLight: colour has " + std::to_string(colour.size()) +
+    throw LightError(what + ": colour has " + std::to_string(colour.size()) +
                      " bytes, expected 3 x " + std::to_string(transfer.width) + "x" +
                      std::to_string(transfer.height));
   }
   if (options.albedo_groups < 0 || options.albedo_groups > 255 || options.albedo_iterations < 1) {
-    throw LightError(
-        "light::EstimateLight: albedo_groups must be 0..255 and albedo_iterations >= 1");
+    throw LightError(what + ": albedo_groups must be 0..255 and albedo_iterations >= 1");
   }
   const bool grouped = !colour.empty() && options.albedo_groups > 0;
-  const int cells = options.albedo_groups;
   // OursFast: fit to the exact sparse samples (every stride / sample_step-th of them), not to the
   // interpolated pixels; the full variant: every stride-th pixel.
   const int step = transfer.sample_step;
@@ -387,7 +395,7 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
                      static_cast<size_t>(transfer.sample_width) * transfer.sample_height * cc ||
                  transfer.sample_valid.size() !=
                      static_cast<size_t>(transfer.sample_width) * transfer.sample_height)) {
-    throw LightError("light::EstimateLight: sample buffer sizes do not match " +
+    throw LightError(what + ": sample buffer sizes do not match " +
                      std::to_string(transfer.sample_width) + "x" +
                      std::to_string(transfer.sample_height));
   }
@@ -397,12 +405,11 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
   const float* t_data = sparse ? transfer.samples.data() : transfer.transfer.data();
   const uint8_t* v_data = sparse ? transfer.sample_valid.data() : transfer.valid.data();
   std::vector<float> rows, targets;
-  std::vector<uint16_t> group;
   const size_t max_rows = static_cast<size_t>((grid_w + s - 1) / s) * ((grid_h + s - 1) / s);
   rows.resize(max_rows * cc_out);
   targets.resize(max_rows);
   std::vector<float> rgb;  // linear colour per row (grouped)
-  if (grouped) group.resize(max_rows), rgb.resize(3 * max_rows);
+  if (grouped) rgb.resize(3 * max_rows);
   size_t m = 0;
   const float inv_albedo = 1.0f / options.albedo;
   for (int y = s / 2; y < grid_h; y += s) {
@@ -425,6 +432,22 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
   }
   rows.resize(m * cc_out);
   targets.resize(m);
+  if (grouped) rgb.resize(3 * m);
+  LightRows out;
+  out.coefficient_count = cc_out;
+  out.rows = std::move(rows);
+  out.targets = std::move(targets);
+  out.rgb = std::move(rgb);
+  return out;
+}
+
+// The fit of EstimateLight to selected rows (SolveLight, with the albedo alternation when rgb is
+// given and options.albedo_groups > 0).
+LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targets,
+                               std::vector<float> rgb, int cc_out, const EstimateOptions& options) {
+  const bool grouped = !rgb.empty() && options.albedo_groups > 0;
+  const int cells = options.albedo_groups;
+  size_t m = targets.size();
   if (!grouped) return SolveLight(rows, targets, cc_out, options);
   const size_t usable = m;  // LightEstimate::pixels: before thinning, as SolveLight reports it
   // Thin the big orientation bins here already (SolveLight would do it in every alternation), so
@@ -445,7 +468,7 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
     targets.resize(m);
   }
   // Chromaticity cells of the linear colour (the albedo's under white light).
-  group.resize(m);
+  std::vector<uint16_t> group(m);
   for (size_t i = 0; i < m; ++i) {
     const float r = rgb[3 * i], gr = rgb[3 * i + 1], b = rgb[3 * i + 2];
     const float sum = r + gr + b;
@@ -493,6 +516,138 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
     for (size_t i = 0; i < m; ++i) scaled[i] = targets[i] / scale[group[i]];
   }
   e.pixels = static_cast<int>(usable);
+  return e;
+}
+
+}  // namespace
+
+LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
+                            const EstimateOptions& options, std::span<const uint8_t> colour) {
+  LightRows r = SelectRows(transfer, intensity, options, colour, "light::EstimateLight");
+  return EstimateFromRows(std::move(r.rows), std::move(r.targets), std::move(r.rgb),
+                          r.coefficient_count, options);
+}
+
+void ShRotationMatrix(const float rotation[9], int bands, std::vector<double>* out) {
+  // A[k][n] = integral Y_k(d) Y_n(R d) dw, exact for bands <= 5 with a Gauss-Legendre rule of
+  // 5 x 10 nodes (products of two degree-4 polynomials have degree 8 <= 2 * 5 - 1).
+  if (bands < 1 || bands > 5) {
+    throw LightError("light::ShRotationMatrix: bands must be 1..5, got " + std::to_string(bands));
+  }
+  static const sh::QuadratureRule rule = sh::GaussLegendreRule(5);
+  const int cc = bands * bands;
+  out->assign(static_cast<size_t>(cc) * cc, 0.0);
+  for (size_t j = 0; j < rule.directions.size(); ++j) {
+    const sh::Vec3& d = rule.directions[j];
+    const sh::Vec3 rd{rotation[0] * d[0] + rotation[1] * d[1] + rotation[2] * d[2],
+                      rotation[3] * d[0] + rotation[4] * d[1] + rotation[5] * d[2],
+                      rotation[6] * d[0] + rotation[7] * d[1] + rotation[8] * d[2]};
+    const std::vector<double> a = sh::Basis(bands, d), b = sh::Basis(bands, rd);
+    for (int k = 0; k < cc; ++k) {
+      for (int n = 0; n < cc; ++n) (*out)[k * cc + n] += rule.weights[j] * a[k] * b[n];
+    }
+  }
+}
+
+TemporalLightEstimator::TemporalLightEstimator(const TemporalOptions& options) : options_(options) {
+  if (options.frames < 1 || !(options.forgetting >= 0) || !(options.forgetting <= 1)) {
+    throw LightError("light::TemporalLightEstimator: frames must be >= 1 and forgetting in [0, 1]");
+  }
+}
+
+void TemporalLightEstimator::Reset() {
+  history_.clear();
+  last_light_.clear();
+}
+
+LightEstimate TemporalLightEstimator::Estimate(const TransferResult& transfer,
+                                               std::span<const float> intensity,
+                                               const EstimateOptions& options,
+                                               std::span<const uint8_t> colour,
+                                               const float* rotation) {
+  LightRows r =
+      SelectRows(transfer, intensity, options, colour, "light::TemporalLightEstimator::Estimate");
+  const int cc = r.coefficient_count;
+  const bool grouped = !r.rgb.empty();
+  // Older frames: drop what no longer fits (coefficient count or grouping changed, or too old),
+  // bring the rest into the current camera frame and age them.
+  while (!history_.empty() && static_cast<int>(history_.size()) >= options_.frames) {
+    history_.pop_back();
+  }
+  for (auto it = history_.begin(); it != history_.end();) {
+    if (it->coefficient_count != cc || it->rgb.empty() != !grouped) {
+      it = history_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  if (static_cast<int>(last_light_.size()) != cc) history_.clear();
+  if (rotation != nullptr && !history_.empty()) {
+    const int bands = static_cast<int>(std::lround(std::sqrt(cc)));
+    ShRotationMatrix(rotation, bands, &rotation_sh_);
+    // The last light into the current frame: l_now = A^T l_prev (A is orthogonal).
+    std::vector<double> l(cc, 0.0);
+    for (int n = 0; n < cc; ++n) {
+      for (int k = 0; k < cc; ++k) l[n] += rotation_sh_[k * cc + n] * last_light_[k];
+    }
+    last_light_ = l;
+    std::vector<float> row(cc);
+    for (Frame& f : history_) {
+      const size_t m = f.targets.size();
+      for (size_t i = 0; i < m; ++i) {
+        float* t = &f.rows[i * cc];
+        // T' = A^T T: T . l_previous = T . (A l_current) (ShRotationMatrix).
+        for (int n = 0; n < cc; ++n) {
+          double v = 0;
+          for (int k = 0; k < cc; ++k) v += rotation_sh_[k * cc + n] * t[k];
+          row[n] = static_cast<float>(v);
+        }
+        std::copy(row.begin(), row.end(), t);
+      }
+    }
+  }
+  // Change detection: the current rows' RMS residual under the last light, against the last
+  // frame's own under its light; a jump by more than reset_ratio (the light switched or moved)
+  // drops the history, so the estimate follows at once instead of blending for frames.
+  auto rms_under = [cc](const std::vector<float>& rows, const std::vector<float>& targets,
+                        const std::vector<double>& light) {
+    double sum = 0;
+    const size_t m = targets.size();
+    for (size_t i = 0; i < m; ++i) {
+      double p = 0;
+      for (int k = 0; k < cc; ++k) p += rows[i * cc + k] * light[k];
+      sum += (p - targets[i]) * (p - targets[i]);
+    }
+    return m > 0 ? std::sqrt(sum / m) : 0.0;
+  };
+  if (!history_.empty() && options_.reset_ratio > 0 &&
+      rms_under(r.rows, r.targets, last_light_) > options_.reset_ratio * last_rms_) {
+    history_.clear();
+  }
+  // Weight forgetting^age by scaling rows and targets by its square root (least squares).
+  const float s = std::sqrt(options_.forgetting);
+  for (Frame& f : history_) {
+    for (float& v : f.rows) v *= s;
+    for (float& v : f.targets) v *= s;
+  }
+  Frame current{cc, r.rows, r.targets, r.rgb};
+  std::vector<float> rows = std::move(r.rows), targets = std::move(r.targets),
+                     rgb = std::move(r.rgb);
+  for (const Frame& f : history_) {
+    rows.insert(rows.end(), f.rows.begin(), f.rows.end());
+    targets.insert(targets.end(), f.targets.begin(), f.targets.end());
+    rgb.insert(rgb.end(), f.rgb.begin(), f.rgb.end());
+  }
+  LightEstimate e =
+      EstimateFromRows(std::move(rows), std::move(targets), std::move(rgb), cc, options);
+  if (e.valid) {
+    last_light_ = e.coefficients;
+    last_rms_ = rms_under(current.rows, current.targets, last_light_);
+  } else {
+    last_light_.clear();
+  }
+  history_.push_front(std::move(current));
+  if (options_.frames == 1) history_.clear();
   return e;
 }
 

@@ -577,4 +577,68 @@ void NormalsFromDepth(std::span<const float> depth, int width, int height, const
   }
 }
 
+void FilterNormals(std::span<const float> depth, int width, int height, const Intrinsics& k,
+                   const NormalFilterOptions& options, std::span<float> normals) {
+  const size_t pixels = static_cast<size_t>(std::max(width, 0)) * std::max(height, 0);
+  if (width < 1 || height < 1 || depth.size() != pixels || normals.size() != 3 * pixels) {
+    throw LightError("light::FilterNormals: depth has " + std::to_string(depth.size()) +
+                     " values and normals " + std::to_string(normals.size()) + ", expected " +
+                     std::to_string(width) + "x" + std::to_string(height) + " (x3)");
+  }
+  if (!Finite(k.fx) || !Finite(k.fy) || !Finite(k.cx) || !Finite(k.cy) || !(k.fx > 0) ||
+      !(k.fy > 0)) {
+    throw LightError("light::FilterNormals: intrinsics must be finite with fx, fy > 0");
+  }
+  const int r = std::max(0, options.radius);
+  const float cos_neighbour =
+      std::cos(std::clamp(options.max_neighbour_angle_deg, 0.0f, 180.0f) * 3.14159265f / 180);
+  const bool view_test = options.max_view_angle_deg < 90;
+  const float cos_view =
+      std::cos(std::clamp(options.max_view_angle_deg, 0.0f, 90.0f) * 3.14159265f / 180);
+  std::vector<uint8_t> drop(pixels, 0);
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const size_t p = static_cast<size_t>(v) * width + u;
+      const float z = depth[p];
+      const float* n = &normals[3 * p];
+      if (!(z > 0) || (n[0] == 0 && n[1] == 0 && n[2] == 0)) continue;
+      if (view_test) {
+        const float rx = static_cast<float>((u - k.cx) / k.fx),
+                    ry = static_cast<float>((v - k.cy) / k.fy);
+        const float c = -(n[0] * rx + n[1] * ry + n[2]) / std::sqrt(rx * rx + ry * ry + 1);
+        if (c < cos_view) {
+          drop[p] = 1;
+          continue;
+        }
+      }
+      if (r == 0) continue;
+      const int du[4] = {-r, r, 0, 0}, dv[4] = {0, 0, -r, r};
+      for (int j = 0; j < 4; ++j) {
+        const int uu = u + du[j], vv = v + dv[j];
+        if (uu < 0 || vv < 0 || uu >= width || vv >= height) {
+          drop[p] = 1;
+          break;
+        }
+        const size_t q = static_cast<size_t>(vv) * width + uu;
+        const float* m = &normals[3 * q];
+        const float zq = depth[q];
+        // Distance of the neighbour's point from the pixel's tangent plane.
+        const float dx =
+            zq * static_cast<float>((uu - k.cx) / k.fx) - z * static_cast<float>((u - k.cx) / k.fx);
+        const float dy =
+            zq * static_cast<float>((vv - k.cy) / k.fy) - z * static_cast<float>((v - k.cy) / k.fy);
+        const float off_plane = std::abs(n[0] * dx + n[1] * dy + n[2] * (zq - z));
+        if (!(zq > 0) || off_plane > options.max_plane_distance_rel * z ||
+            n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_neighbour) {
+          drop[p] = 1;
+          break;
+        }
+      }
+    }
+  }
+  for (size_t p = 0; p < pixels; ++p) {
+    if (drop[p]) normals[3 * p] = normals[3 * p + 1] = normals[3 * p + 2] = 0;
+  }
+}
+
 }  // namespace probeless::light

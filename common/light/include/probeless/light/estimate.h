@@ -4,6 +4,7 @@
 // linear band (Sloan's optimal linear direction, probeless/sh/sh.h).
 #pragma once
 
+#include <deque>
 #include <span>
 #include <vector>
 
@@ -93,5 +94,54 @@ LightEstimate EstimateLight(const TransferResult& transfer, std::span<const floa
 // {4, 9, 16, 25}.
 LightEstimate SolveLight(std::span<const float> rows, std::span<const float> targets,
                          int coefficient_count, const EstimateOptions& options);
+
+// The real-SH rotation matrix of `bands` bands (row-major bands^2 x bands^2) for the direction
+// rotation `rotation` (row-major 3 x 3, d' = R d): A[k][n] = integral Y_k(d) Y_n(R d) dw, so that
+// light coefficients l' of a function in the rotated frame give l = A l' in the original one
+// (exact up to rounding: Gauss-Legendre quadrature). Throws LightError unless 1 <= bands <= 5.
+void ShRotationMatrix(const float rotation[9], int bands, std::vector<double>* out);
+
+struct TemporalOptions {
+  // Frames whose rows are solved together (the current one included; 1 = EstimateLight).
+  int frames = 1;
+  // Weight of a frame's rows relative to the next newer frame's, in [0, 1]: the frame k frames
+  // back weighs forgetting^k.
+  float forgetting = 0.5f;
+  // The history is dropped when the current frame's RMS residual under the last estimate
+  // exceeds reset_ratio x the last frame's own (the light switched or moved; 0 = never).
+  float reset_ratio = 1.3f;
+};
+
+// Temporal accumulation (beyond the paper): the fit of EstimateLight over the rows of the last
+// `frames` frames, older ones weighted by forgetting^age and rotated into the current camera
+// frame, so that per-frame noise averages out; a light that switches or jumps resets the history
+// (TemporalOptions::reset_ratio) and is followed at once. Not thread-safe; one per stream.
+class TemporalLightEstimator {
+ public:
+  // Throws LightError for frames < 1 or forgetting outside [0, 1].
+  explicit TemporalLightEstimator(const TemporalOptions& options = {});
+
+  // As EstimateLight for the current frame. `rotation` (row-major 3 x 3, optional): the
+  // camera's rotation from the previous call's camera frame into this one's (d_now = R d_prev;
+  // nullptr = the camera did not rotate). Throws LightError as EstimateLight (prefix
+  // "light::TemporalLightEstimator::Estimate").
+  LightEstimate Estimate(const TransferResult& transfer, std::span<const float> intensity,
+                         const EstimateOptions& options, std::span<const uint8_t> colour = {},
+                         const float* rotation = nullptr);
+  // Forgets the history (e.g. after a tracking loss or a cut).
+  void Reset();
+  const TemporalOptions& options() const { return options_; }
+
+ private:
+  struct Frame {
+    int coefficient_count = 0;
+    std::vector<float> rows, targets, rgb;  // rows in the latest camera frame, pre-weighted
+  };
+  TemporalOptions options_;
+  std::deque<Frame> history_;  // newest first
+  std::vector<double> rotation_sh_;
+  std::vector<double> last_light_;  // the last estimate, current camera frame
+  double last_rms_ = 0;             // the last frame's RMS residual under it
+};
 
 }  // namespace probeless::light

@@ -172,6 +172,32 @@ void NormalsFromDepth(std::span<const float> depth, int width, int height,
                       const Intrinsics& intrinsics, std::vector<float>* normals,
                       float max_jump_rel = 0.05f, int step = 1);
 
+// Which pixels' normals FilterNormals keeps: the light fit trusts every normal it gets, and the
+// orientation balancing of the estimator (EstimateOptions::balance_normals) gives the few pixels
+// of a rare orientation the most weight — exactly where the bad normals of sensor depth are
+// (depth edges, creases, grazing surfaces). Measured on courtyard_sun with sensor effects:
+// clean normals with the sensor's depth 3.9 degrees, the sensor's normals with clean depth 33
+// degrees (docs/light.md, "Sensor input").
+struct NormalFilterOptions {
+  // Neighbours `radius` pixels away on both axes (4 of them) must lie within
+  // max_plane_distance_rel * z of the pixel's tangent plane and have a normal within
+  // max_neighbour_angle_deg of it; one that fails (or is a hole or off the image) drops the
+  // pixel. radius 0 = no such test.
+  int radius = 4;
+  float max_plane_distance_rel = 0.02f;
+  float max_neighbour_angle_deg = 20.0f;
+  // Drops surfaces seen at more than this angle between the normal and the ray to the camera
+  // (degrees; >= 90 = no test): quantisation and noise tilt grazing normals most.
+  float max_view_angle_deg = 75.0f;
+};
+
+// Sets the normals of unreliable pixels (NormalFilterOptions) to (0, 0, 0) in place; the depth
+// stays (the pixel still occludes, it only stops being a receiver / a row of the fit).
+// Throws LightError for size mismatches or bad intrinsics.
+void FilterNormals(std::span<const float> depth, int width, int height,
+                   const Intrinsics& intrinsics, const NormalFilterOptions& options,
+                   std::span<float> normals);
+
 // Edge-aware separable box filter of a depth image (metres, 0 = none) in place: each pixel becomes
 // the mean of the valid pixels within `radius` along x, then along y, whose depth is within
 // max_rel * z of its own. Holes stay holes. Quantised sensor depth (Kinect: steps ~0.0029 z^2)
