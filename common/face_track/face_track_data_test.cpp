@@ -250,9 +250,11 @@ TEST(FaceTrackData, SyntheticFaceOrbitStreamTrackedWhileLitFromTheSide) {
       "face_orbit: face in %d / %d frames (%d flow-only), mean error %.3f iod, worst %.3f, "
       "%d > 0.3; without flow tracking %d frames\n",
       found, frames, flow_only, sum / found, worst, wrong, found_legacy);
-  // Measured: 120 of 120 (21 flow-only), mean 0.099 iod, none > 0.3; without flow 82.
+  // Measured: 120 of 120 (21 flow-only), mean 0.099 iod, none > 0.3; without flow 82. Since the
+  // procedural head has human proportions (issue #6): 120 of 120 (3 flow-only), mean 0.061, worst
+  // 0.163 iod; without flow 120 too, so flow tracking must not lose frames rather than win them.
   EXPECT_GE(found, frames - 6);
-  EXPECT_GT(found, found_legacy);
+  EXPECT_GE(found, found_legacy);
   EXPECT_EQ(wrong, 0);
   EXPECT_LT(sum / found, 0.15);
   EXPECT_LE(worst_flow_confidence, 0.5);  // a face kept by the flow alone cannot look certain

@@ -11,6 +11,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,14 @@ double AngleDeg(const std::array<float, 3>& a, const raytrace::Vec3& b) {
   return std::acos(std::clamp(d / n, -1.0, 1.0)) * 180 / M_PI;
 }
 
+// The model under test: $PROBELESS_FACE_LIGHT_MODEL if set (to compare a candidate model, e.g. an
+// `rtf_train --align tracker` one), else the shipped data/face_light/default_model.txt.
+std::string ModelPath() {
+  const char* path = std::getenv("PROBELESS_FACE_LIGHT_MODEL");
+  if (path && *path) return path;
+  return std::string(PROBELESS_SOURCE_DIR) + "/data/face_light/default_model.txt";
+}
+
 double Median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   return v.empty() ? NAN : v[v.size() / 2];
@@ -48,8 +57,7 @@ struct Errors {
 Errors RunFrames(const sim::Scenario& scenario, const std::vector<uint64_t>& frames, bool srgb) {
   sim::Simulator simulator(scenario, 2);
   ft::FaceTracker tracker;
-  const fl::FaceLightModel model =
-      fl::LoadModel(std::string(PROBELESS_SOURCE_DIR) + "/data/face_light/default_model.txt");
+  const fl::FaceLightModel model = fl::LoadModel(ModelPath());
   ft::SamplerOptions so;
   so.srgb_input = srgb;
   const ft::FaceSampler sampler(model, so);
@@ -75,8 +83,9 @@ Errors RunFrames(const sim::Scenario& scenario, const std::vector<uint64_t>& fra
     const std::array<float, 3> d = ft::RotateVector(t.pose.rotation, e.dominant_direction);
     out.vs_face.push_back(AngleDeg(d, f.face_light.dominant_direction));
     out.vs_camera.push_back(AngleDeg(d, f.light.dominant_direction));
-    std::printf("frame %3d: estimate %6.3f %6.3f %6.3f, error vs face light %5.1f, vs camera %5.1f\n",
-                static_cast<int>(i), d[0], d[1], d[2], out.vs_face.back(), out.vs_camera.back());
+    std::printf(
+        "frame %3d: estimate %6.3f %6.3f %6.3f, error vs face light %5.1f, vs camera %5.1f\n",
+        static_cast<int>(i), d[0], d[1], d[2], out.vs_face.back(), out.vs_camera.back());
   }
   return out;
 }
@@ -106,17 +115,72 @@ TEST(FaceSyntheticLight, FaceGroundTruthIsTheLightSeenFromTheHead) {
             40);
 }
 
+// Eye-to-mouth drop and eye-to-nose-tip drop over the inter-ocular distance of the four
+// CanonicalLandmarks points (right eye, left eye, nose tip, mouth), measured perpendicular to the
+// eye line (roll-invariant).
+std::array<double, 2> Proportions(const std::array<fl::Point2, 4>& k) {
+  const double ex = k[1].x - k[0].x, ey = k[1].y - k[0].y;
+  const double iod = std::hypot(ex, ey);
+  const double mx = (k[0].x + k[1].x) / 2, my = (k[0].y + k[1].y) / 2;
+  const auto drop = [&](const fl::Point2& p) { return ((p.y - my) * ex - (p.x - mx) * ey) / iod; };
+  return {drop(k[3]) / iod, drop(k[2]) / iod};
+}
+
+// The similarity-aligned sampler assumes a face proportioned like the Yale B faces the model was
+// trained on (kTrackerCanonical: eye-mouth / inter-ocular 1.02, eye-nose tip 0.47); a longer face
+// puts the samples elsewhere (docs/face_light.md). The procedural head's ground-truth landmarks
+// must have those proportions, and so must the tracker's landmarks on it while the light is near
+// the camera (face_orbit frames 0-9; with the light at the side, frames 12-27, the tracked eyes
+// drift a few pixels up and the tracked eye-mouth ratio rises to ~1.1).
+TEST(FaceSyntheticLight, ProceduralHeadHasYaleBProportions) {
+  const std::array<double, 2> yaleb = Proportions(ft::kTrackerCanonical);
+  sim::Simulator simulator(FaceOrbit(), 2);
+  ft::FaceTracker tracker;
+  std::vector<double> mouth, nose, truth_mouth, truth_nose;
+  for (uint64_t i : {0, 3, 6, 9}) {
+    const sim::SimFrame f = simulator.Render(i);
+    const ft::ImageView view{f.rgb.data(), f.camera.width, f.camera.height,
+                             static_cast<size_t>(f.camera.width) * 3, ft::PixelFormat::kRgb};
+    const ft::FaceTrack t =
+        tracker.Track(view, {f.camera.fx, f.camera.fy, f.camera.cx, f.camera.cy});
+    ASSERT_EQ(f.face.landmarks.size(), 68u);
+    std::vector<ft::Point2f> truth;
+    for (const auto& l : f.face.landmarks) truth.push_back({l[0], l[1]});
+    const std::array<double, 2> g = Proportions(ft::CanonicalLandmarks(truth));
+    truth_mouth.push_back(g[0]);
+    truth_nose.push_back(g[1]);
+    ASSERT_TRUE(t.found) << "the procedural head was not found in frame " << i;
+    const std::array<double, 2> p = Proportions(ft::CanonicalLandmarks(t.landmarks));
+    mouth.push_back(p[0]);
+    nose.push_back(p[1]);
+  }
+  std::printf(
+      "eye-mouth / inter-ocular: Yale B %.3f, tracked %.3f, ground truth %.3f; eye-nose "
+      "tip: Yale B %.3f, tracked %.3f, ground truth %.3f\n",
+      yaleb[0], Median(mouth), Median(truth_mouth), yaleb[1], Median(nose), Median(truth_nose));
+  // Measured: tracked 1.061 / 0.475, ground truth 1.006 / 0.497 (the head before issue #6: ground
+  // truth 1.26 / 0.76, tracked over frames 0-27 1.11 / 0.74).
+  EXPECT_NEAR(Median(truth_mouth), yaleb[0], 0.04);
+  EXPECT_NEAR(Median(truth_nose), yaleb[1], 0.05);
+  EXPECT_NEAR(Median(mouth), yaleb[0], 0.05);
+  EXPECT_NEAR(Median(nose), yaleb[1], 0.06);
+}
+
 TEST(FaceSyntheticLight, OrbitCameraFrameDirectionAgainstTheLightAtTheFace) {
   const Errors linear_units = RunFrames(FaceOrbit(), kFrames, /*srgb=*/false);
   const Errors decoded = RunFrames(FaceOrbit(), kFrames, /*srgb=*/true);
   ASSERT_GE(decoded.vs_face.size(), 10u) << "the procedural head was not found";
   const double raw = Median(linear_units.vs_face), fixed = Median(decoded.vs_face);
   const double camera = Median(decoded.vs_camera);
-  std::printf("median error vs the light at the face: sRGB values %.1f deg, decoded %.1f deg; "
-              "decoded vs the light at the camera %.1f deg\n",
-              raw, fixed, camera);
-  // Measured: decoded 16.2 deg, sRGB values as they are 26.8 deg, vs the camera-position light
-  // 60 deg (the demo's symptom: ~80 deg with the sRGB values).
+  std::printf(
+      "median error vs the light at the face: sRGB values %.1f deg, decoded %.1f deg; "
+      "decoded vs the light at the camera %.1f deg\n",
+      raw, fixed, camera);
+  // Measured with the shipped (landmark-aligned) model on the human-proportioned head (issue #6):
+  // decoded 5.6 deg, sRGB values as they are 15.1 deg, vs the camera-position light 52.4 deg (the
+  // crop-sampled model: 4.5 / 13.7 / 51.3 deg; before issue #6, on the long-faced head, it measured
+  // 16.2 / 26.8 / 60 deg and the aligned model 24.1 deg decoded). The demo's symptom: ~80 deg with
+  // the sRGB values vs the camera-position light.
   EXPECT_LT(fixed, 20.0);
   EXPECT_LT(fixed, raw - 6);
   EXPECT_GT(camera, 50.0);

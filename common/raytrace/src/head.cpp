@@ -10,7 +10,15 @@ namespace probeless::raytrace {
 namespace {
 
 constexpr Vec3 kCentre{0, 0.035f, 0.085f};   // head ellipsoid centre
-constexpr Vec3 kAxes{0.075f, 0.115f, 0.1f};  // semi-axes
+constexpr Vec3 kAxes{0.075f, 0.115f, 0.1f};  // semi-axes (y: below the centre)
+constexpr float kUpperAxisY = 0.15f;   // y semi-axis above the centre: crown 115 mm above the eyes
+constexpr float kHairlineY = -0.065f;  // front hairline at the midline, 65 mm above the eyes
+// Human proportions (face frame, eye line y = 0, eye centres at x = +-0.032: inter-pupil 64 mm):
+// nose tip ~30 mm and mouth line 62 mm below the eye line, chin ~44 mm below the mouth line. Seen
+// by face_orbit's camera, the ground-truth landmarks give eye-mouth / inter-ocular 1.01 and
+// eye-nose tip 0.50, the tracked Yale B faces 1.02 and 0.47 (face_track::kTrackerCanonical): the
+// similarity the face-light sampler fits then puts its samples where they are on a Yale B face.
+constexpr float kMouthY = 0.062f;
 
 float Gauss(float d, float sigma) { return std::exp(-d * d / (2 * sigma * sigma)); }
 float SmoothStep(float lo, float hi, float x) {
@@ -23,33 +31,42 @@ float FaceRelief(float x, float y) {
   const float ax = std::abs(x);
   // Nose: a ridge from the bridge to the tip, then the base.
   float nose_height = 0;
-  if (y > -0.01f && y < 0.062f) {
-    const float rise = 0.004f + 0.020f * SmoothStep(-0.005f, 0.045f, y);
-    const float fall = 1 - SmoothStep(0.047f, 0.06f, y);
-    const float width = 0.006f + 0.008f * SmoothStep(0.0f, 0.05f, y);
+  if (y > -0.02f && y < 0.044f) {
+    const float rise = 0.004f + 0.020f * SmoothStep(-0.005f, 0.028f, y);
+    const float fall = 1 - SmoothStep(0.030f, 0.042f, y);
+    const float width = 0.006f + 0.008f * SmoothStep(-0.007f, 0.035f, y);
     nose_height = rise * fall * Gauss(x, width);
   }
   const float brow = 0.006f * Gauss(y + 0.022f, 0.006f) * Gauss(ax - 0.033f, 0.02f);
   const float socket = -0.007f * Gauss(ax - 0.032f, 0.011f) * Gauss(y, 0.009f);
-  const float lips = 0.005f * Gauss(y - 0.078f, 0.006f) * Gauss(x, 0.02f);
-  const float chin = 0.006f * Gauss(y - 0.112f, 0.012f) * Gauss(x, 0.022f);
-  const float cheeks = 0.004f * Gauss(ax - 0.04f, 0.012f) * Gauss(y - 0.035f, 0.015f);
+  // Lips: an upper and a lower bulge with the mouth line (kMouthY) in the crease between them.
+  const float lips = (0.004f * Gauss(y - kMouthY + 0.004f, 0.0035f) +
+                      0.005f * Gauss(y - kMouthY - 0.005f, 0.004f)) *
+                     Gauss(x, 0.02f);
+  const float chin = 0.006f * Gauss(y - 0.106f, 0.012f) * Gauss(x, 0.022f);
+  const float cheeks = 0.004f * Gauss(ax - 0.04f, 0.012f) * Gauss(y - 0.028f, 0.015f);
   return nose_height + brow + socket + lips + chin + cheeks;
 }
 
 Vec3 SkinAlbedo(Vec3 p, Vec3 d, Vec3 skin) {
   const float ax = std::abs(p.x);
-  // Hair: the top and back of the head.
-  if (d.y < -0.45f || (d.z > 0.2f && d.y < 0.1f)) return {0.09f, 0.06f, 0.04f};
+  // Hair: the top, sides and back of the head; on the front above a hairline that drops towards
+  // the temples (a forehead of ~40 mm above the brows).
+  const Vec3 hair{0.09f, 0.06f, 0.04f};
+  if (d.z < -0.5f) {
+    if (p.y < kHairlineY + 0.02f * SmoothStep(0.025f, 0.065f, ax)) return hair;
+  } else if (d.y < -0.45f || (d.z > 0.2f && d.y < 0.1f)) {
+    return hair;
+  }
   // Brows.
   if (d.z < 0 && std::abs(p.y + 0.024f + 0.004f * Gauss(ax - 0.03f, 0.012f)) < 0.0045f &&
       ax > 0.011f && ax < 0.054f)
     return {0.07f, 0.045f, 0.035f};
   // Lips.
   const float lx = p.x / 0.025f;
-  const float ly = (p.y - 0.078f) / 0.0095f;
+  const float ly = (p.y - kMouthY) / 0.0095f;
   if (d.z < 0 && lx * lx + ly * ly < 1) {
-    if (std::abs(p.y - 0.078f) < 0.0015f && std::abs(p.x) < 0.021f) return {0.15f, 0.04f, 0.04f};
+    if (std::abs(p.y - kMouthY) < 0.0015f && std::abs(p.x) < 0.021f) return {0.15f, 0.04f, 0.04f};
     return {0.55f, 0.18f, 0.18f};
   }
   return skin;
@@ -85,27 +102,28 @@ std::vector<std::array<float, 2>> LandmarkLayout() {
   for (int i = 0; i <= 16; ++i) {  // jaw, subject's right ear to left ear via the chin
     const double t = std::numbers::pi * i / 16;
     l.push_back({static_cast<float>(-0.068 * std::cos(t)),
-                 static_cast<float>(0.005 + 0.118 * std::sin(t))});
+                 static_cast<float>(0.005 + 0.112 * std::sin(t))});
   }
   const float brow_x[5] = {-0.054f, -0.045f, -0.035f, -0.024f, -0.013f};
   const float brow_y[5] = {-0.018f, -0.026f, -0.029f, -0.028f, -0.024f};
   for (int i = 0; i < 5; ++i) l.push_back({brow_x[i], brow_y[i]});
   for (int i = 4; i >= 0; --i) l.push_back({-brow_x[i], brow_y[i]});
-  for (float y : {0.0f, 0.014f, 0.028f, 0.043f}) l.push_back({0, y});
-  for (float x : {-0.014f, -0.007f, 0.0f, 0.007f, 0.014f}) l.push_back({x, 0.055f});
+  for (float y : {0.0f, 0.009f, 0.018f, 0.028f}) l.push_back({0, y});
+  for (float x : {-0.014f, -0.007f, 0.0f, 0.007f, 0.014f}) l.push_back({x, 0.039f});
   const float eye[6][2] = {{-0.046f, 0}, {-0.037f, -0.005f}, {-0.027f, -0.005f},
                            {-0.018f, 0}, {-0.027f, 0.004f},  {-0.037f, 0.004f}};
   for (const auto& e : eye) l.push_back({e[0], e[1]});
   const float left_eye[6][2] = {{0.018f, 0}, {0.027f, -0.005f}, {0.037f, -0.005f},
                                 {0.046f, 0}, {0.037f, 0.004f},  {0.027f, 0.004f}};
   for (const auto& e : left_eye) l.push_back({e[0], e[1]});
+  // Mouth: offsets (x, y - kMouthY).
   const float mouth[20][2] = {
-      {-0.024f, 0.078f}, {-0.015f, 0.071f}, {-0.005f, 0.069f}, {0, 0.070f},
-      {0.005f, 0.069f},  {0.015f, 0.071f},  {0.024f, 0.078f},  {0.015f, 0.085f},
-      {0.005f, 0.087f},  {0, 0.088f},       {-0.005f, 0.087f}, {-0.015f, 0.085f},
-      {-0.019f, 0.078f}, {-0.007f, 0.077f}, {0, 0.077f},       {0.007f, 0.077f},
-      {0.019f, 0.078f},  {0.007f, 0.079f},  {0, 0.079f},       {-0.007f, 0.079f}};
-  for (const auto& m : mouth) l.push_back({m[0], m[1]});
+      {-0.024f, 0.000f}, {-0.015f, -0.007f}, {-0.005f, -0.009f}, {0.0f, -0.008f},
+      {0.005f, -0.009f}, {0.015f, -0.007f},  {0.024f, 0.000f},   {0.015f, 0.007f},
+      {0.005f, 0.009f},  {0.0f, 0.010f},     {-0.005f, 0.009f},  {-0.015f, 0.007f},
+      {-0.019f, 0.000f}, {-0.007f, -0.001f}, {0.0f, -0.001f},    {0.007f, -0.001f},
+      {0.019f, 0.000f},  {0.007f, 0.001f},   {0.0f, 0.001f},     {-0.007f, 0.001f}};
+  for (const auto& m : mouth) l.push_back({m[0], kMouthY + m[1]});
   return l;
 }
 
@@ -125,7 +143,8 @@ HeadModel MakeHead(Vec3 skin, int resolution) {
       const Vec3 d{static_cast<float>(std::sin(theta) * std::sin(phi)),
                    static_cast<float>(-std::cos(theta)),
                    static_cast<float>(-std::sin(theta) * std::cos(phi))};
-      Vec3 p = kCentre + Vec3{kAxes.x * d.x, kAxes.y * d.y, kAxes.z * d.z};
+      Vec3 p =
+          kCentre + Vec3{kAxes.x * d.x, (d.y < 0 ? kUpperAxisY : kAxes.y) * d.y, kAxes.z * d.z};
       // Face relief on the front, ears on the sides.
       const float front = SmoothStep(0.1f, 0.5f, -d.z);
       p.z -= front * FaceRelief(p.x, p.y);
@@ -171,15 +190,20 @@ HeadModel MakeHead(Vec3 skin, int resolution) {
   for (float side : {-1.0f, 1.0f}) {
     const float ex = side * 0.032f;
     const std::optional<Vec3> socket = CastRay(m, {ex, 0, -0.5f}, {0, 0, 1});
-    const float radius = 0.0125f;
-    const Vec3 centre{ex, 0, (socket ? socket->z : -0.01f) + radius - 0.004f};
+    const float radius = 0.016f;
+    const Vec3 centre{ex, 0, (socket ? socket->z : -0.01f) + radius - 0.005f};
     Mesh eye = MakeSphere(radius, 48);
     eye.colors.resize(eye.positions.size());
     for (size_t i = 0; i < eye.positions.size(); ++i) {
       const Vec3 n = eye.normals[i];
       const float angle = std::acos(std::clamp(-n.z, -1.0f, 1.0f));
-      eye.colors[i] = angle < 0.2f    ? Vec3{0.02f, 0.02f, 0.02f}
-                      : angle < 0.45f ? Vec3{0.22f, 0.13f, 0.07f}
+      // Eyelids (skin, slightly shaded) over the top and bottom of the ball: a ~10 mm high opening.
+      const bool lid = n.y < -0.33f || n.y > 0.36f;
+      const bool lashes = n.y < -0.24f && n.z < 0;
+      eye.colors[i] = lid             ? skin * 0.8f
+                      : lashes        ? Vec3{0.05f, 0.035f, 0.03f}
+                      : angle < 0.16f ? Vec3{0.02f, 0.02f, 0.02f}
+                      : angle < 0.35f ? Vec3{0.22f, 0.13f, 0.07f}
                                       : Vec3{0.8f, 0.78f, 0.74f};
       eye.positions[i] = eye.positions[i] + centre;
     }

@@ -81,7 +81,10 @@ Mesh MakeCylinder(float radius, float height, int segments = 32);
 // and vertex albedo (eyes with iris and pupil, brows, nose, lips, ears). Built in the face frame
 // of msgs::FaceObservation: origin at the nose bridge between the eyes, x towards the subject's
 // left ear, y towards the chin, z into the head (the face looks along -z). About 0.15 m wide,
-// 0.23 m from crown to chin. `skin` is the linear RGB skin albedo.
+// 0.23 m from crown to chin; human proportions: pupils at x = +-32 mm on the eye line y = 0, nose
+// tip ~30 mm and mouth line 62 mm below it, hairline 65 mm above it (eye-mouth / inter-ocular
+// ~1.0 in a frontal view, as the tracked Yale B faces: docs/sim.md). `skin` is the linear RGB skin
+// albedo.
 struct HeadModel {
   Mesh mesh;
   // The 68 iBUG 300-W landmarks as points on the surface, face frame (metres), in iBUG order:
