@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include <numbers>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "probeless/face_light/estimator.h"
@@ -449,7 +451,13 @@ TEST(EstimatorTest, PriorAndNonNegativeModes) {
             "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
             "direction_ridge, directional_robust >= 0; robust_iterations 1..20; "
             "robust_threshold > 0; nn_directions 9..1024; nn_iterations 1..10000; "
-            "directional_grid 0..1024; directional_iterations 0..100)");
+            "directional_grid 0..1024; directional_iterations 0..100; mask_cache 0..64)");
+  EXPECT_NE(ErrorOf([&] {
+              EstimatorOptions bad;
+              bad.mask_cache = 65;
+              FaceLightEstimator(model, bad);
+            }),
+            "(no error)");
 }
 
 // Direction RTFs of `bands` bands for the synthetic normals of SyntheticRtfs(count, seed): the
@@ -536,6 +544,196 @@ TEST(EstimatorTest, DirectionalFitRecoversTheDirection) {
       AngleDeg(FaceLightEstimator(model, robust).EstimateGray(values).dominant_direction, d);
   EXPECT_LT(robust_error, 0.3);
   EXPECT_LT(robust_error, plain_error);
+}
+
+// With invalid samples the estimator downdates the full-set matrices (the 9 x 9 normal matrix and
+// the directional fit's 25 x 25 cost matrix with its start-grid tables) and caches them per
+// validity mask (EstimatorOptions::mask_cache). Results must be bit-identical with and without the
+// cache (miss, hit, after eviction, gray sharing RGB's entry), equal the plain least-squares solve
+// in double on the valid samples up to the float rounding of the output, and agree with a model
+// made of the valid samples alone (every sample valid: the float pseudo-inverse) to float
+// precision.
+TEST(EstimatorTest, InvalidSamplesMatchThePlainSolveWithAndWithoutTheMaskCache) {
+  const int count = 300;
+  FaceLightModel model = ModelFrom(SyntheticRtfs(count, 41));
+  model.direction_bands = 5;
+  model.direction_rtf = SyntheticDirectionRtfs(count, 41, 5);
+  EstimatorOptions options;
+  options.direction_ridge = 0;  // the ridge scales with the trace, which the sub-models change
+  EstimatorOptions uncached_options = options;
+  uncached_options.mask_cache = 0;
+  const FaceLightEstimator cached(model, options);
+  const FaceLightEstimator uncached(model, uncached_options);
+  std::mt19937_64 rng(5);
+  const std::vector<double> lights[3] = {TestLight(30, 10), TestLight(-50, -15), TestLight(70, 30)};
+  std::vector<float> rgb(3 * count);
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float> channel = Render(model, lights[c]);
+    for (int i = 0; i < count; ++i) {
+      rgb[3 * i + c] = channel[i] + 0.01f * static_cast<float>(Uniform(rng) - 0.5);
+    }
+  }
+  std::vector<float> gray(count);
+  for (int i = 0; i < count; ++i) gray[i] = rgb[3 * i + 1];
+  // Sample i invalid with probability invalid_percent / 100 (fixed seed).
+  const auto random_mask = [&](uint64_t seed, int invalid_percent) {
+    std::vector<uint64_t> bits(8, ~uint64_t{0});
+    std::mt19937_64 mask_rng(seed);
+    for (int i = 0; i < count; ++i) {
+      if (static_cast<int>(mask_rng() % 100) < invalid_percent) {
+        bits[i / 64] &= ~(uint64_t{1} << (i % 64));
+      }
+    }
+    return bits;
+  };
+  const auto expect_identical = [](const LightEstimate& a, const LightEstimate& b) {
+    ASSERT_EQ(a.channels, b.channels);
+    for (int n = 0; n < 9; ++n) {
+      for (int c = 0; c < 3; ++c) EXPECT_EQ(a.coefficients[n][c], b.coefficients[n][c]);
+    }
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(a.dominant_direction[k], b.dominant_direction[k]);
+    EXPECT_EQ(a.intensity, b.intensity);
+    EXPECT_EQ(a.confidence, b.confidence);
+    EXPECT_EQ(a.rms_residual, b.rms_residual);
+    EXPECT_EQ(a.samples_used, b.samples_used);
+  };
+  const std::vector<uint64_t> steady = random_mask(1, 10);
+  const LightEstimate reference = uncached.EstimateRgb(rgb, steady);
+  expect_identical(cached.EstimateRgb(rgb, steady), reference);  // miss
+  expect_identical(cached.EstimateRgb(rgb, steady), reference);  // hit
+  expect_identical(cached.EstimateGray(gray, steady), uncached.EstimateGray(gray, steady));
+  for (uint64_t seed = 2; seed < 8; ++seed) {  // six other masks evict it (4 entries)
+    const std::vector<uint64_t> other = random_mask(seed, 10);
+    expect_identical(cached.EstimateRgb(rgb, other), uncached.EstimateRgb(rgb, other));
+  }
+  expect_identical(cached.EstimateRgb(rgb, steady), reference);  // miss again
+
+  // The plain solve on the valid samples only; 10 % and 60 % invalid (the latter rebuilds the
+  // normal matrix from the valid samples instead of downdating).
+  for (const int invalid_percent : {10, 60}) {
+    const std::vector<uint64_t> mask = random_mask(11, invalid_percent);
+    FaceLightModel sub = model;
+    sub.positions.clear(), sub.rtf.clear(), sub.residual_rms.clear(), sub.direction_rtf.clear();
+    std::vector<float> sub_rgb;
+    for (int i = 0; i < count; ++i) {
+      if (!((mask[i / 64] >> (i % 64)) & 1u)) continue;
+      sub.positions.push_back(model.positions[i]);
+      sub.rtf.push_back(model.rtf[i]);
+      sub.residual_rms.push_back(model.residual_rms[i]);
+      sub.direction_rtf.insert(sub.direction_rtf.end(), model.direction_rtf.begin() + i * 25,
+                               model.direction_rtf.begin() + (i + 1) * 25);
+      sub_rgb.insert(sub_rgb.end(), rgb.begin() + 3 * i, rgb.begin() + 3 * i + 3);
+    }
+    const int used = sub.SampleCount();
+    // Plain solve in double, per channel: (T^T T) e = T^T v over the valid samples (Gaussian
+    // elimination; no prior).
+    double reference[3][9];
+    for (int c = 0; c < 3; ++c) {
+      double system[9][10] = {};
+      for (int i = 0; i < used; ++i) {
+        for (int a = 0; a < 9; ++a) {
+          for (int b = 0; b < 9; ++b) system[a][b] += double(sub.rtf[i][a]) * sub.rtf[i][b];
+          system[a][9] += double(sub.rtf[i][a]) * sub_rgb[3 * i + c];
+        }
+      }
+      for (int k = 0; k < 9; ++k) {
+        for (int r = k + 1; r < 9; ++r) {
+          const double f = system[r][k] / system[k][k];
+          for (int col = k; col < 10; ++col) system[r][col] -= f * system[k][col];
+        }
+      }
+      for (int k = 8; k >= 0; --k) {
+        double sum = system[k][9];
+        for (int col = k + 1; col < 9; ++col) sum -= system[k][col] * reference[c][col];
+        reference[c][k] = sum / system[k][k];
+      }
+    }
+    const LightEstimate plain = FaceLightEstimator(sub, options).EstimateRgb(sub_rgb);
+    const LightEstimate masked = cached.EstimateRgb(rgb, mask);
+    ASSERT_EQ(masked.samples_used, used);
+    // Equal to the double solve up to the float rounding of the output (2^-24 relative).
+    double worst_reference = 0;
+    for (int n = 0; n < 9; ++n) {
+      for (int c = 0; c < 3; ++c) {
+        const double error = std::abs(masked.coefficients[n][c] - reference[c][n]);
+        EXPECT_LE(error, 0x1.0p-24 * std::abs(reference[c][n]) + 1e-12) << "n=" << n << " c=" << c;
+        worst_reference = std::max(worst_reference, error / std::abs(reference[c][n]));
+      }
+    }
+    // The all-valid model of the valid samples (float pseudo-inverse): float precision.
+    double worst = 0;
+    for (int n = 0; n < 9; ++n) {
+      for (int c = 0; c < 3; ++c) {
+        const double p = plain.coefficients[n][c];
+        worst = std::max(worst, std::abs(masked.coefficients[n][c] - p) / (1 + std::abs(p)));
+      }
+    }
+    EXPECT_LT(worst, 1e-5) << invalid_percent << " % invalid";
+    const std::array<double, 3> plain_direction{
+        plain.dominant_direction[0], plain.dominant_direction[1], plain.dominant_direction[2]};
+    EXPECT_LT(AngleDeg(masked.dominant_direction, plain_direction), 1e-2);
+    EXPECT_NEAR(masked.intensity, plain.intensity, 1e-5 * (1 + plain.intensity));
+    // The residual (closed form from coefficient space) matches the per-sample residuals.
+    double ss_res = 0;
+    for (int i = 0; i < used; ++i) {
+      double predicted = 0, mean = 0;
+      for (int c = 0; c < 3; ++c) mean += sub_rgb[3 * i + c] / 3.0;
+      for (int n = 0; n < 9; ++n) {
+        double light = 0;
+        for (int c = 0; c < 3; ++c) light += masked.coefficients[n][c] / 3.0;
+        predicted += sub.rtf[i][n] * light;
+      }
+      ss_res += (mean - predicted) * (mean - predicted);
+    }
+    EXPECT_NEAR(masked.rms_residual, std::sqrt(ss_res / used), 1e-3 * masked.rms_residual);
+    std::printf(
+        "%d %% invalid: vs the double solve %.3g, vs the valid-samples model %.3g (relative), "
+        "direction %.3g deg\n",
+        invalid_percent, worst_reference, worst,
+        AngleDeg(masked.dominant_direction, plain_direction));
+  }
+}
+
+// Two threads share one estimator (and its mask cache) with changing masks: every estimate equals
+// the single-threaded one of an estimator without a cache.
+TEST(EstimatorTest, MaskCacheIsThreadSafe) {
+  const int count = 300;
+  FaceLightModel model = ModelFrom(SyntheticRtfs(count, 43));
+  model.direction_bands = 5;
+  model.direction_rtf = SyntheticDirectionRtfs(count, 43, 5);
+  EstimatorOptions uncached_options;
+  uncached_options.mask_cache = 0;
+  const FaceLightEstimator shared(model);
+  const FaceLightEstimator uncached(model, uncached_options);
+  std::vector<float> rgb(3 * count);
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float> channel = Render(model, TestLight(20 - 40 * c, 10));
+    for (int i = 0; i < count; ++i) rgb[3 * i + c] = channel[i];
+  }
+  std::vector<std::vector<uint64_t>> masks(6, std::vector<uint64_t>(8, ~uint64_t{0}));
+  std::vector<LightEstimate> expected;
+  for (size_t k = 0; k < masks.size(); ++k) {
+    for (int i = static_cast<int>(k); i < count; i += 7 + static_cast<int>(k)) {
+      masks[k][i / 64] &= ~(uint64_t{1} << (i % 64));
+    }
+    expected.push_back(uncached.EstimateRgb(rgb, masks[k]));
+  }
+  std::atomic<int> mismatches{0};
+  const auto run = [&](int offset) {
+    for (int iteration = 0; iteration < 300; ++iteration) {
+      const size_t k = (iteration * (offset + 1) + offset) % masks.size();
+      const LightEstimate e = shared.EstimateRgb(rgb, masks[k]);
+      bool same = e.samples_used == expected[k].samples_used &&
+                  e.dominant_direction == expected[k].dominant_direction &&
+                  e.confidence == expected[k].confidence;
+      for (int n = 0; n < 9; ++n) same = same && e.coefficients[n] == expected[k].coefficients[n];
+      if (!same) ++mismatches;
+    }
+  };
+  std::thread first(run, 0), second(run, 1);
+  first.join();
+  second.join();
+  EXPECT_EQ(mismatches.load(), 0);
 }
 
 TEST(EstimatorTest, FillShLightCopiesTheEstimate) {

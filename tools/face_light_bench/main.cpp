@@ -1,7 +1,7 @@
 // face_light_bench: nanoseconds per light estimate for a model (default: the shipped model) over
 // deterministic synthetic frames (fixed seed), per estimator mode; median of repeated batches.
 //
-//   face_light_bench [--model MODEL] [--frames N] [--json FILE]
+//   face_light_bench [--model MODEL] [--frames N] [--json FILE] [--case NAME]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -24,16 +24,21 @@ struct Case {
   fl::EstimatorOptions options;
   bool rgb = false;
   int invalid_every = 0;  // every k-th sample invalid (0 = all valid)
+  // true: every frame of a batch has its own validity mask with ~1/invalid_every of the samples
+  // invalid at random (fixed seed), so no per-mask cache hits; false: one steady mask.
+  bool changing_mask = false;
 };
 
 int Run(int argc, char** argv) {
   std::string model_path = std::string(PROBELESS_DEFAULT_MODEL);
   std::string json_path;
+  std::string only_case;
   int frames = 2000;
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (flag == "-h" || flag == "--help") {
-      std::cout << "usage: face_light_bench [--model MODEL] [--frames N] [--json FILE]\n";
+      std::cout
+          << "usage: face_light_bench [--model MODEL] [--frames N] [--json FILE] [--case NAME]\n";
       return 0;
     }
     if (i + 1 >= argc) {
@@ -47,6 +52,8 @@ int Run(int argc, char** argv) {
       frames = std::max(1, std::atoi(value.c_str()));
     } else if (flag == "--json") {
       json_path = value;
+    } else if (flag == "--case") {
+      only_case = value;
     } else {
       std::cerr << "face_light_bench: unknown option " << flag << "\n";
       return 2;
@@ -84,6 +91,7 @@ int Run(int argc, char** argv) {
   cases.push_back({"gray", linear, false, 0});
   cases.push_back({"rgb", linear, true, 0});
   cases.push_back({"rgb_10pct_invalid", linear, true, 10});
+  cases.push_back({"rgb_10pct_invalid_changing", linear, true, 10, true});
   fl::EstimatorOptions prior = linear;
   prior.back_prior = 0.1;
   cases.push_back({"rgb_back_prior", prior, true, 0});
@@ -99,6 +107,7 @@ int Run(int argc, char** argv) {
   cases.push_back({"gray_directional", directional, false, 0});
   cases.push_back({"rgb_directional", directional, true, 0});
   cases.push_back({"rgb_directional_10pct_invalid", directional, true, 10});
+  cases.push_back({"rgb_directional_10pct_invalid_changing", directional, true, 10, true});
   fl::EstimatorOptions directional_robust = directional;
   directional_robust.directional_robust = 3;
   cases.push_back({"rgb_directional_robust", directional_robust, true, 0});
@@ -114,12 +123,22 @@ int Run(int argc, char** argv) {
       "median and minimum over the batches)\n",
       n, frames);
   volatile float sink = 0;
+  const size_t words = (static_cast<size_t>(n) + 63) / 64;
+  bool first = true;
   for (size_t k = 0; k < cases.size(); ++k) {
     const Case& c = cases[k];
+    if (!only_case.empty() && c.name != only_case) continue;
     const fl::FaceLightEstimator estimator(model, c.options);
-    std::vector<uint64_t> bits(8, ~uint64_t{0});
-    if (c.invalid_every > 0) {
-      for (int i = 0; i < n; i += c.invalid_every) bits[i / 64] &= ~(uint64_t{1} << (i % 64));
+    // Validity masks, one per frame of a batch (all the same unless changing_mask).
+    std::vector<std::vector<uint64_t>> masks(64, std::vector<uint64_t>(words, ~uint64_t{0}));
+    std::mt19937_64 mask_rng(777);
+    for (auto& bits : masks) {
+      if (c.invalid_every <= 0) continue;
+      for (int i = 0; i < n; ++i) {
+        const bool invalid =
+            c.changing_mask ? mask_rng() % c.invalid_every == 0 : i % c.invalid_every == 0;
+        if (invalid) bits[i / 64] &= ~(uint64_t{1} << (i % 64));
+      }
     }
     // Many short batches (64 estimates, well below a scheduler time slice): on a loaded machine
     // the minimum is the cost without preemption, the median what a loaded core gives.
@@ -129,6 +148,7 @@ int Run(int argc, char** argv) {
     for (int batch = 0; batch < batch_count; ++batch) {
       const auto start = std::chrono::steady_clock::now();
       for (int f = 0; f < batch_frames; ++f) {
+        const std::vector<uint64_t>& bits = masks[f];
         const fl::LightEstimate e = c.rgb ? estimator.EstimateRgb(rgb_frames[f], bits)
                                           : estimator.EstimateGray(gray_frames[f], bits);
         sink = sink + e.coefficients[0][0];
@@ -144,7 +164,8 @@ int Run(int argc, char** argv) {
                 best, ns / 1000, best / 1000);
     char entry[160];
     std::snprintf(entry, sizeof entry, "%s\n    \"%s\": {\"median\": %.0f, \"min\": %.0f}",
-                  k ? "," : "", c.name.c_str(), ns, best);
+                  first ? "" : ",", c.name.c_str(), ns, best);
+    first = false;
     json += entry;
   }
   json += "\n  }\n}\n";

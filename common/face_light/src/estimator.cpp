@@ -3,12 +3,24 @@
 #include "probeless/face_light/estimator.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstring>
+#include <mutex>
 #include <numbers>
 
 #include "linalg.h"
 #include "probeless/msgs/sh_light.h"
 #include "probeless/sh/sh.h"
+
+// Hot kernels are compiled twice, for AVX2 and for the baseline, and the loader picks the version
+// for the CPU (GCC / Clang function multi-versioning, x86-64 only). Neither uses FMA (no
+// -mfma), so both versions perform the same operations in the same order: the same values.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define PROBELESS_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define PROBELESS_AVX2_CLONES
+#endif
 
 namespace probeless::face_light {
 namespace {
@@ -18,8 +30,9 @@ constexpr int kMaxNnDirections = 1024;
 constexpr int kMaxPassive = 32;
 
 // sum_i a[i] b[i] for count a multiple of 8, with 8 independent lanes so the compiler vectorises
-// it without -ffast-math.
-float Dot8(const float* a, const float* b, int count) {
+// it without -ffast-math. Cloned for AVX2 (chosen at load time on CPUs that have it): the same
+// lanes, operations and order (no FMA), so the same values, one 8-wide register per row.
+PROBELESS_AVX2_CLONES float Dot8(const float* a, const float* b, int count) {
   float lanes[8] = {};
   for (int i = 0; i < count; i += 8) {
     for (int l = 0; l < 8; ++l) lanes[l] += a[i + l] * b[i + l];
@@ -28,8 +41,195 @@ float Dot8(const float* a, const float* b, int count) {
          ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]));
 }
 
+// out[r] = sum_i rows[r * stride + i] x[i] for r < count (stride a multiple of 8), accumulated
+// in double in 8 independent lanes (the products of the float values are exact in double), x
+// converted once, three rows at a time (independent accumulator chains). Cloned for AVX2 (same
+// operations and order, no FMA: the same values).
+using Double4 = double __attribute__((vector_size(32)));
+PROBELESS_AVX2_CLONES void DotDRows(const double* rows, int count, const float* x, int stride,
+                                    double* out) {
+  alignas(64) double xd[kMaxSamples + 8];
+  for (int i = 0; i < stride; ++i) xd[i] = x[i];
+  const auto finish = [](const Double4& low, const Double4& high) {  // lanes 0-3 and 4-7
+    return ((low[0] + high[0]) + (low[1] + high[1])) + ((low[2] + high[2]) + (low[3] + high[3]));
+  };
+  int r = 0;
+  for (; r + 3 <= count; r += 3) {
+    const double* a = rows + static_cast<size_t>(r) * stride;
+    Double4 low[3] = {}, high[3] = {};
+    for (int i = 0; i < stride; i += 8) {
+      Double4 x0, x1;
+      std::memcpy(&x0, xd + i, sizeof x0);
+      std::memcpy(&x1, xd + i + 4, sizeof x1);
+      for (int k = 0; k < 3; ++k) {
+        Double4 a0, a1;
+        std::memcpy(&a0, a + static_cast<size_t>(k) * stride + i, sizeof a0);
+        std::memcpy(&a1, a + static_cast<size_t>(k) * stride + i + 4, sizeof a1);
+        low[k] += a0 * x0;
+        high[k] += a1 * x1;
+      }
+    }
+    for (int k = 0; k < 3; ++k) out[r + k] = finish(low[k], high[k]);
+  }
+  for (; r < count; ++r) {
+    const double* a = rows + static_cast<size_t>(r) * stride;
+    double lanes[8] = {};
+    for (int i = 0; i < stride; i += 8) {
+      for (int l = 0; l < 8; ++l) lanes[l] += a[i + l] * xd[i + l];
+    }
+    out[r] = ((lanes[0] + lanes[4]) + (lanes[1] + lanes[5])) +
+             ((lanes[2] + lanes[6]) + (lanes[3] + lanes[7]));
+  }
+}
+
+// out[r] = Dot8(rows + r * stride, x, stride) for r < count: several rows at a time, so several
+// independent accumulator chains (a single row is bound by the latency of its additions); the same
+// lanes, operations and order as Dot8, so the same values. Cloned for AVX2.
+using Float8 = float __attribute__((vector_size(32)));
+template <int Block, typename T>
+inline void Dot8RowsBlocked(const float* rows, int count, const float* x, int stride, T* out) {
+  int r = 0;
+  for (; r + Block <= count; r += Block) {
+    const float* a = rows + static_cast<size_t>(r) * stride;
+    Float8 acc[Block] = {};
+    for (int i = 0; i < stride; i += 8) {
+      Float8 xv;
+      std::memcpy(&xv, x + i, sizeof xv);
+      for (int k = 0; k < Block; ++k) {
+        Float8 av;
+        std::memcpy(&av, a + static_cast<size_t>(k) * stride + i, sizeof av);
+        acc[k] += av * xv;
+      }
+    }
+    for (int k = 0; k < Block; ++k) {
+      out[r + k] = ((acc[k][0] + acc[k][4]) + (acc[k][1] + acc[k][5])) +
+                   ((acc[k][2] + acc[k][6]) + (acc[k][3] + acc[k][7]));
+    }
+  }
+  for (; r < count; ++r) out[r] = Dot8(rows + static_cast<size_t>(r) * stride, x, stride);
+}
+// Blocks of 3 for 9 rows, 5 for 25 (no single-row remainder), else 4.
+template <typename T>
+PROBELESS_AVX2_CLONES void Dot8Rows(const float* rows, int count, const float* x, int stride,
+                                    T* out) {
+  if (count % 5 == 0) return Dot8RowsBlocked<5>(rows, count, x, stride, out);
+  if (count % 3 == 0) return Dot8RowsBlocked<3>(rows, count, x, stride, out);
+  Dot8RowsBlocked<4>(rows, count, x, stride, out);
+}
+
+// Solves L L^T x = b in place for `count` (<= 3) right-hand sides b[c] (l from
+// internal::Cholesky<9>): the operations of linalg::CholeskySolveFactored per right-hand side (the
+// same values), interleaved so their division chains overlap.
+void CholeskySolve9Multi(const std::array<double, 81>& l, double (*b)[kRtfCoefficients],
+                         int count) {
+  constexpr int n = kRtfCoefficients;
+  for (int i = 0; i < n; ++i) {
+    double s[3];
+    for (int c = 0; c < count; ++c) s[c] = b[c][i];
+    for (int k = 0; k < i; ++k) {
+      for (int c = 0; c < count; ++c) s[c] -= l[i * n + k] * b[c][k];
+    }
+    for (int c = 0; c < count; ++c) b[c][i] = s[c] / l[i * n + i];
+  }
+  for (int i = n - 1; i >= 0; --i) {
+    double s[3];
+    for (int c = 0; c < count; ++c) s[c] = b[c][i];
+    for (int k = i + 1; k < n; ++k) {
+      for (int c = 0; c < count; ++c) s[c] -= l[k * n + i] * b[c][k];
+    }
+    for (int c = 0; c < count; ++c) b[c][i] = s[c] / l[i * n + i];
+  }
+}
+
 constexpr int kMaxDirN = 25;       // 5 bands
 constexpr size_t kMaxGrid = 1024;  // EstimatorOptions::directional_grid
+constexpr int kMaxMaskCache = 64;  // EstimatorOptions::mask_cache
+constexpr int kMaskWords = kMaxSamples / 64;
+
+// Symmetric m (N x N, row-major) += sign * sum_j (w t) t^T over the listed samples j (rows
+// [index * N] of wt = w t and t), sign = +1 or -1: the lower triangle, mirrored (m stays exactly
+// symmetric). Cloned for AVX2 (same operations and order, no FMA: the same values).
+template <int N>
+inline void RankUpdateBody(double* m, const double* wt_rows, const double* t_rows, const int* index,
+                           int count, double sign) {
+  // Row a (its lower triangle, b <= a) accumulated in registers, the samples in order; then
+  // mirrored.
+#pragma GCC unroll 32
+  for (int a = 0; a < N; ++a) {
+    double acc[N];
+    for (int b = 0; b <= a; ++b) acc[b] = m[a * N + b];
+    for (int j = 0; j < count; ++j) {
+      const double s = sign * wt_rows[static_cast<size_t>(index[j]) * N + a];
+      const double* t = t_rows + static_cast<size_t>(index[j]) * N;
+#pragma GCC unroll 32
+      for (int b = 0; b <= a; ++b) acc[b] += s * t[b];
+    }
+    for (int b = 0; b <= a; ++b) m[a * N + b] = m[b * N + a] = acc[b];
+  }
+}
+PROBELESS_AVX2_CLONES void RankUpdate9(double* m, const double* wt, const double* t,
+                                       const int* index, int count, double sign) {
+  RankUpdateBody<9>(m, wt, t, index, count, sign);
+}
+PROBELESS_AVX2_CLONES void RankUpdate25(double* m, const double* wt, const double* t,
+                                        const int* index, int count, double sign) {
+  RankUpdateBody<25>(m, wt, t, index, count, sign);
+}
+PROBELESS_AVX2_CLONES void RankUpdate16(double* m, const double* wt, const double* t,
+                                        const int* index, int count, double sign) {
+  RankUpdateBody<16>(m, wt, t, index, count, sign);
+}
+void RankUpdate(double* m, int n, const double* wt, const double* t, const int* index, int count,
+                double sign) {
+  if (n == 9) return RankUpdate9(m, wt, t, index, count, sign);
+  if (n == 16) return RankUpdate16(m, wt, t, index, count, sign);
+  if (n == 25) return RankUpdate25(m, wt, t, index, count, sign);
+  for (int j = 0; j < count; ++j) {  // other sizes: the same, sample by sample
+    const double* wt_j = wt + static_cast<size_t>(index[j]) * n;
+    const double* t_j = t + static_cast<size_t>(index[j]) * n;
+    for (int a = 0; a < n; ++a) {
+      const double s = sign * wt_j[a];
+      for (int b = 0; b <= a; ++b) m[a * n + b] += s * t_j[b];
+    }
+  }
+  for (int a = 0; a < n; ++a) {
+    for (int b = 0; b < a; ++b) m[b * n + a] = m[a * n + b];
+  }
+}
+
+// Y_k^T M Y_k and (M Y_k)_0 of every grid direction k for a symmetric n x n M (lower triangle
+// used), from the transposed basis values [a * count + k]; vectorised over k. Cloned for AVX2
+// (same operations and order, no FMA: the same values).
+PROBELESS_AVX2_CLONES void GridTables(const double* m, int n, const double* basis_t, size_t count,
+                                      double* syy, double* s0y) {
+  std::fill(syy, syy + count, 0.0);
+  std::fill(s0y, s0y + count, 0.0);
+  double inner[kMaxGrid];
+  for (int a = 0; a < n; ++a) {
+    const double* ya = basis_t + a * count;
+    const double maa = m[a * n + a];
+    for (size_t k = 0; k < count; ++k) inner[k] = maa * ya[k];
+    for (int b = 0; b < a; ++b) {
+      const double mab2 = 2 * m[a * n + b];
+      const double* yb = basis_t + b * count;
+      for (size_t k = 0; k < count; ++k) inner[k] += mab2 * yb[k];
+    }
+    const double m0a = m[a];
+    for (size_t k = 0; k < count; ++k) {
+      syy[k] += ya[k] * inner[k];
+      s0y[k] += m0a * ya[k];
+    }
+  }
+}
+
+// What the estimator derives from one validity mask (EstimatorOptions::mask_cache).
+struct MaskData {
+  std::array<double, 81> factor{};  // Cholesky factor of the downdated T^T W T + R
+  bool factor_ok = false;
+  bool dir_ready = false;  // the directional fit's data below is filled
+  double dir_m[kMaxDirN * kMaxDirN];
+  double syy[kMaxGrid], s0y[kMaxGrid];
+};
 
 // Normalisation constants of sh::EvaluateBasis for bands <= 5, index l(l+1)+m for m >= 0:
 // sqrt((2l+1)/(4 pi) (l-m)!/(l+m)!), times sqrt(2) for m > 0.
@@ -54,8 +254,11 @@ const BasisConstants& Constants() {
 
 // sh::EvaluateBasis<double> (same recurrence, same convention) with the normalisation constants
 // precomputed: the directional fit evaluates it ~50 times per estimate.
-void FastBasis(const BasisConstants& constants, int bands, double x, double y, double z,
-               double* out) {
+// Bands > 0: that many bands, fixed (the loops unroll completely); 0: runtime_bands.
+template <int Bands>
+void FastBasisImpl(const BasisConstants& constants, int runtime_bands, double x, double y, double z,
+                   double* out) {
+  const int bands = Bands > 0 ? Bands : runtime_bands;
   double c = 1, s = 0;  // Re and Im of (x + i y)^m
   double q_mm = 1;      // (-1)^m (2m-1)!!
   for (int m = 0; m < bands; ++m) {
@@ -88,6 +291,81 @@ void FastBasis(const BasisConstants& constants, int bands, double x, double y, d
   }
 }
 
+void FastBasis(const BasisConstants& constants, int bands, double x, double y, double z,
+               double* out) {
+  if (bands == 5) return FastBasisImpl<5>(constants, 5, x, y, z, out);
+  if (bands == 3) return FastBasisImpl<3>(constants, 3, x, y, z, out);
+  FastBasisImpl<0>(constants, bands, x, y, z, out);
+}
+
+// For a symmetric 25 x 25 M (row-major) and y, b: y^T M y, (M y)_0 and b^T y. M y as a sum of
+// rows (= columns) so the loops vectorise; cloned for AVX2 (same operations and order, no FMA).
+PROBELESS_AVX2_CLONES void Forms25(const double* m, const double* y, const double* b, double* syy,
+                                   double* s0y, double* ry) {
+  constexpr int kSize = 25;
+  double my[kSize] = {};
+  for (int j = 0; j < kSize; ++j) {
+    const double* row = m + j * kSize;
+    const double yj = y[j];
+    for (int i = 0; i < kSize; ++i) my[i] += row[i] * yj;
+  }
+  double s[4] = {}, r[4] = {};
+  for (int i = 0; i < 24; i += 4) {
+    for (int l = 0; l < 4; ++l) {
+      s[l] += y[i + l] * my[i + l];
+      r[l] += b[i + l] * y[i + l];
+    }
+  }
+  *syy = ((s[0] + s[2]) + (s[1] + s[3])) + y[24] * my[24];
+  *ry = ((r[0] + r[2]) + (r[1] + r[3])) + b[24] * y[24];
+  *s0y = my[0];
+}
+
+// Deinterleaves values[i * channels + c] into v[c][i] (zero padded up to stride), flags the
+// samples with a non-finite value (valid[i] = 0, else 1; 0 from n to stride), applies the
+// response exponent (x -> max(x, 0)^exponent) and averages the channels into mean. Branch-free so
+// the loops vectorise.
+void PrepareSamples(const float* values, int channels, int n, int stride, double exponent,
+                    float (*v)[kMaxSamples + 8], float* mean, uint8_t* valid) {
+  if (channels == 3) {  // one pass (the compiler deinterleaves with shuffles)
+    for (int i = 0; i < n; ++i) {
+      v[0][i] = values[3 * i];
+      v[1][i] = values[3 * i + 1];
+      v[2][i] = values[3 * i + 2];
+    }
+  } else {
+    for (int c = 0; c < channels; ++c) {
+      for (int i = 0; i < n; ++i) v[c][i] = values[i * channels + c];
+    }
+  }
+  for (int c = 0; c < channels; ++c) {
+    for (int i = n; i < stride; ++i) v[c][i] = 0;
+  }
+  // Finite: x - x is 0 for finite x, NaN otherwise.
+  float check[kMaxSamples + 8];
+  for (int i = 0; i < n; ++i) check[i] = v[0][i] - v[0][i];
+  for (int c = 1; c < channels; ++c) {
+    for (int i = 0; i < n; ++i) check[i] += v[c][i] - v[c][i];
+  }
+  for (int i = 0; i < n; ++i) valid[i] = check[i] == 0.0f;
+  for (int i = n; i < stride; ++i) valid[i] = 0;
+  for (int c = 0; c < channels; ++c) {
+    float* row = v[c];
+    if (exponent == 0.5) {
+      for (int i = 0; i < n; ++i) row[i] = std::sqrt(row[i] > 0 ? row[i] : 0.0f);
+    } else if (exponent != 1) {
+      const float g = static_cast<float>(exponent);
+      for (int i = 0; i < n; ++i) row[i] = std::pow(row[i] > 0 ? row[i] : 0.0f, g);
+    }
+  }
+  const float inv_channels = 1.0f / channels;
+  for (int i = 0; i < stride; ++i) {
+    float sum = 0;
+    for (int c = 0; c < channels; ++c) sum += v[c][i];
+    mean[i] = sum * inv_channels;
+  }
+}
+
 // Closed-form a (>= 0) and c of E = a Y + c e_0 for one direction from syy = Y^T M Y,
 // s0y = (M Y)_0, ry = b^T Y, s00 = M_00, r0 = b_0; returns the cost -(a ry + c r0).
 double ClosedFormCost(double syy, double s0y, double ry, double s00, double r0, bool ambient,
@@ -111,6 +389,38 @@ double ClosedFormCost(double syy, double s0y, double ry, double s00, double r0, 
   if (a_out) *a_out = a;
   if (c_out) *c_out = c;
   return cost;
+}
+
+// ClosedFormCost of every grid direction k from the tables syy[k], s0y[k] and the transposed basis
+// values basis_t[a * count + k] (ry = b^T Y_k as one matrix-vector product): the same formulas,
+// branch-free so the loops vectorise; cloned for AVX2 (no FMA: the same values).
+PROBELESS_AVX2_CLONES void GridCosts(const double* basis_t, const double* b, int n, size_t count,
+                                     const double* syy, const double* s0y, double s00, double r0,
+                                     bool ambient, double* cost) {
+  double ry[kMaxGrid];
+  std::fill(ry, ry + count, 0.0);
+  for (int a = 0; a < n; ++a) {
+    const double* row = basis_t + a * count;
+    const double ba = b[a];
+    for (size_t k = 0; k < count; ++k) ry[k] += ba * row[k];
+  }
+  if (ambient) {
+    const double c_only = s00 > 0 ? r0 / s00 : 0;  // a = 0
+    const double cost_c_only = -(0 * 0.0 + c_only * r0);
+    for (size_t k = 0; k < count; ++k) {
+      const double det = syy[k] * s00 - s0y[k] * s0y[k];
+      const bool solvable = det > 1e-12 * syy[k] * s00;
+      const double safe_det = solvable ? det : 1.0;
+      const double a = solvable ? (ry[k] * s00 - s0y[k] * r0) / safe_det : 0.0;
+      const double c = solvable ? (syy[k] * r0 - s0y[k] * ry[k]) / safe_det : 0.0;
+      cost[k] = a > 0 ? -(a * ry[k] + c * r0) : cost_c_only;
+    }
+  } else {
+    for (size_t k = 0; k < count; ++k) {
+      const double a = syy[k] > 0 ? std::max(ry[k] / (syy[k] > 0 ? syy[k] : 1.0), 0.0) : 0.0;
+      cost[k] = -a * ry[k];
+    }
+  }
 }
 
 // Start directions of the directional fit with their basis values ([k * n + a]) and, for the
@@ -137,8 +447,30 @@ struct DirectionalProblem {
   // True if M is the full-set matrix, so the grids' precomputed Y^T M Y and (M Y)_0 hold.
   bool tables = false;
 
+  // y^T M y from the lower triangle (M symmetric), (M y)_0 and b^T y; fixed-size loops for the
+  // usual sizes (fully unrolled: no branches).
+  template <int N>
+  double CostFixed(const double* y, double* a_out, double* c_out) const {
+    double syy = 0, ry = 0;
+    for (int i = 0; i < N; ++i) {
+      const double* row = m + i * N;
+      double off = 0;
+      for (int j = 0; j < i; ++j) off += row[j] * y[j];
+      syy += y[i] * (row[i] * y[i] + 2 * off);
+      ry += b[i] * y[i];
+    }
+    double s0y = 0;
+    for (int j = 0; j < N; ++j) s0y += m[j] * y[j];
+    return ClosedFormCost(syy, s0y, ry, m[0], b[0], ambient, a_out, c_out);
+  }
   double Cost(const double* y, double* a_out = nullptr, double* c_out = nullptr) const {
-    // y^T M y from the lower triangle (M symmetric), (M y)_0 and b^T y.
+    if (n == 25) {
+      double syy, s0y, ry;
+      Forms25(m, y, b, &syy, &s0y, &ry);
+      return ClosedFormCost(syy, s0y, ry, m[0], b[0], ambient, a_out, c_out);
+    }
+    if (n == 16) return CostFixed<16>(y, a_out, c_out);
+    if (n == 9) return CostFixed<9>(y, a_out, c_out);
     double syy = 0, ry = 0;
     for (int i = 0; i < n; ++i) {
       const double* row = m + i * n;
@@ -190,28 +522,23 @@ sh::Vec3 FitDirection(const DirectionalProblem& problem, const sh::Vec3& init,
                       const DirectionGrid& grid, int iterations, double* power,
                       double* ambient = nullptr) {
   sh::Vec3 d = init;
-  double best = problem.CostAt(d);
+  double best_a = 0, best_c = 0;  // a and c at d while known (saves re-evaluating it at the end)
+  double best = problem.CostAt(d, &best_a, &best_c);
+  bool known = true;
   const size_t count = grid.directions.size();
   if (problem.tables && count <= kMaxGrid) {
     // M is the full-set matrix: b^T Y_k of every grid direction as one matrix-vector product,
     // then the closed form with the precomputed Y_k^T M Y_k and (M Y_k)_0.
-    double ry[kMaxGrid];
-    std::fill(ry, ry + count, 0.0);
-    for (int a = 0; a < problem.n; ++a) {
-      const double* row = grid.basis_t + a * count;
-      const double ba = problem.b[a];
-      for (size_t k = 0; k < count; ++k) ry[k] += ba * row[k];
-    }
-    const double s00 = problem.m[0], r0 = problem.b[0];
+    double costs[kMaxGrid];
+    GridCosts(grid.basis_t, problem.b, problem.n, count, grid.syy, grid.s0y, problem.m[0],
+              problem.b[0], problem.ambient, costs);
     for (size_t k = 0; k < count; ++k) {
-      const double cost = ClosedFormCost(grid.syy[k], grid.s0y[k], ry[k], s00, r0, problem.ambient,
-                                         nullptr, nullptr);
-      if (cost < best) best = cost, d = grid.directions[k];
+      if (costs[k] < best) best = costs[k], d = grid.directions[k], known = false;
     }
   } else {
     for (size_t k = 0; k < count; ++k) {
       const double cost = problem.GridCost(grid, k);
-      if (cost < best) best = cost, d = grid.directions[k];
+      if (cost < best) best = cost, d = grid.directions[k], known = false;
     }
   }
   constexpr double h = 1e-3;
@@ -242,20 +569,84 @@ sh::Vec3 FitDirection(const DirectionalProblem& problem, const sh::Vec3& init,
     bool improved = false;
     for (int back = 0; back < 6; ++back) {
       const sh::Vec3 candidate = Moved(d, t1, t2, su, sv);
-      const double cost = problem.CostAt(candidate);
+      double a = 0, c = 0;
+      const double cost = problem.CostAt(candidate, &a, &c);
       if (cost < f0) {
         d = candidate, best = cost, improved = true;
+        best_a = a, best_c = c, known = true;
         break;
       }
       su *= 0.5, sv *= 0.5;
     }
     if (!improved || std::sqrt(su * su + sv * sv) < 1e-4) break;
   }
-  if (power) problem.CostAt(d, power, ambient);
+  if (power && known) {
+    *power = best_a;
+    if (ambient) *ambient = best_c;
+  } else if (power) {
+    problem.CostAt(d, power, ambient);
+  }
   return d;
 }
 
 }  // namespace
+
+// Least-recently-used entries, each the key (validity bits) and its MaskData; stamp 0 = empty.
+struct FaceLightEstimator::MaskCache {
+  struct Entry {
+    uint64_t key[kMaskWords] = {};
+    uint64_t stamp = 0;
+    MaskData data;
+  };
+  std::mutex mutex;
+  std::vector<Entry> entries;
+  uint64_t clock = 0;
+  int dir_n = 0;
+  size_t grid = 0;
+
+  // Copies the entry of key into data; false if absent or the cache is busy.
+  bool Lookup(const uint64_t* key, MaskData& data) {
+    std::unique_lock lock(mutex, std::try_to_lock);
+    if (!lock.owns_lock()) return false;
+    for (Entry& entry : entries) {
+      if (entry.stamp == 0 || std::memcmp(entry.key, key, sizeof entry.key) != 0) continue;
+      entry.stamp = ++clock;
+      data.factor = entry.data.factor;
+      data.factor_ok = entry.data.factor_ok;
+      data.dir_ready = entry.data.dir_ready;
+      if (data.dir_ready) {
+        std::copy(entry.data.dir_m, entry.data.dir_m + dir_n * dir_n, data.dir_m);
+        std::copy(entry.data.syy, entry.data.syy + grid, data.syy);
+        std::copy(entry.data.s0y, entry.data.s0y + grid, data.s0y);
+      }
+      return true;
+    }
+    return false;
+  }
+  // Stores data under key in the least recently used entry (skipped if the cache is busy).
+  void Store(const uint64_t* key, const MaskData& data) {
+    std::unique_lock lock(mutex, std::try_to_lock);
+    if (!lock.owns_lock()) return;
+    Entry* oldest = &entries.front();
+    for (Entry& entry : entries) {
+      if (entry.stamp < oldest->stamp) oldest = &entry;
+    }
+    std::memcpy(oldest->key, key, sizeof oldest->key);
+    oldest->stamp = ++clock;
+    oldest->data.factor = data.factor;
+    oldest->data.factor_ok = data.factor_ok;
+    oldest->data.dir_ready = data.dir_ready;
+    if (data.dir_ready) {
+      std::copy(data.dir_m, data.dir_m + dir_n * dir_n, oldest->data.dir_m);
+      std::copy(data.syy, data.syy + grid, oldest->data.syy);
+      std::copy(data.s0y, data.s0y + grid, oldest->data.s0y);
+    }
+  }
+};
+
+FaceLightEstimator::~FaceLightEstimator() = default;
+FaceLightEstimator::FaceLightEstimator(FaceLightEstimator&&) noexcept = default;
+FaceLightEstimator& FaceLightEstimator::operator=(FaceLightEstimator&&) noexcept = default;
 
 FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOptions options)
     : options_(options) {
@@ -267,13 +658,14 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       options.nn_iterations > 10000 || options.directional_grid < 0 ||
       options.directional_grid > 1024 || options.directional_iterations < 0 ||
       options.directional_iterations > 100 || !(options.direction_ridge >= 0) ||
-      !(options.directional_robust >= 0)) {
+      !(options.directional_robust >= 0) || options.mask_cache < 0 ||
+      options.mask_cache > kMaxMaskCache) {
     throw FaceLightError(
         "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
         "direction_ridge, directional_robust >= 0; robust_iterations 1..20; robust_threshold > 0; "
         "nn_directions "
         "9..1024; nn_iterations 1..10000; directional_grid 0..1024; directional_iterations "
-        "0..100)");
+        "0..100; mask_cache 0..64)");
   }
   sample_count_ = model.SampleCount();
   exponent_ = model.intensity_exponent;
@@ -335,6 +727,7 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       wrtf_t_[static_cast<size_t>(n) * stride_ + i] = weights_[i] * rtf_[i * kN + n];
     }
   }
+  wrtf_td_.assign(wrtf_t_.begin(), wrtf_t_.end());
   for (int i = 0; i < n_samples; ++i) {
     double column[kN];
     for (int n = 0; n < kN; ++n) column[n] = weights_[i] * double(rtf_[i * kN + n]);
@@ -401,6 +794,26 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
     }
   }
   uniform_weights_ = options.weight_floor == 0;
+  rtf_d_.resize(rtf_.size());
+  wrtf_d_.resize(rtf_.size());
+  for (size_t k = 0; k < rtf_.size(); ++k) {
+    rtf_d_[k] = rtf_[k];
+    wrtf_d_[k] = double(weights_[k / kN]) * double(rtf_[k]);
+  }
+  if (!dir_rtf_.empty()) {
+    dir_rtf_d_.resize(dir_rtf_.size());
+    dir_wrtf_d_.resize(dir_rtf_.size());
+    for (size_t k = 0; k < dir_rtf_.size(); ++k) {
+      dir_rtf_d_[k] = dir_rtf_[k];
+      dir_wrtf_d_[k] = double(weights_[k / dir_n_]) * double(dir_rtf_[k]);
+    }
+  }
+  if (options.mask_cache > 0) {
+    cache_ = std::make_unique<MaskCache>();
+    cache_->entries.resize(options.mask_cache);
+    cache_->dir_n = dir_n_;
+    cache_->grid = dir_grid_.size();
+  }
   if (options.non_negative) {
     const std::vector<sh::Vec3> directions = sh::FibonacciSphere(options.nn_directions);
     nn_basis_.resize(directions.size() * kN);
@@ -444,37 +857,18 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
   alignas(32) float mean_value[kMaxSamples + 8];
   uint8_t valid[kMaxSamples];
   uint8_t active[kMaxSamples];
-  for (int c = 0; c < channels; ++c) {
-    float* row = v[c];
-    for (int i = 0; i < n_samples; ++i) row[i] = values[i * channels + c];
-    for (int i = n_samples; i < stride; ++i) row[i] = 0;
-    if (exponent_ == 0.5) {
-      for (int i = 0; i < n_samples; ++i) row[i] = std::sqrt(row[i] > 0 ? row[i] : 0.0f);
-    } else if (exponent_ != 1) {
-      const float g = static_cast<float>(exponent_);
-      for (int i = 0; i < n_samples; ++i) row[i] = std::pow(row[i] > 0 ? row[i] : 0.0f, g);
-    }
-  }
+  PrepareSamples(values, channels, n_samples, stride, exponent_, v, mean_value, valid);
   int valid_count = 0;
-  const float inv_channels = 1.0f / channels;
-  for (int i = 0; i < stride; ++i) {
-    float sum = 0;
-    for (int c = 0; c < channels; ++c) sum += v[c][i];
-    mean_value[i] = sum * inv_channels;
-  }
-  // Valid = the caller's bit and finite values (x - x is 0 for finite x, NaN otherwise); written
-  // branch-free so the loops vectorise.
-  for (int i = 0; i < n_samples; ++i) {
-    float check = 0;
-    for (int c = 0; c < channels; ++c) {
-      const float x = values[i * channels + c];
-      check += x - x;
-    }
-    valid[i] = check == 0.0f;
-  }
   if (!valid_bits.empty()) {
-    for (int i = 0; i < n_samples; ++i) {
-      valid[i] &= static_cast<uint8_t>((valid_bits[i >> 6] >> (i & 63)) & 1u);
+    for (int i = 0; i < n_samples; i += 8) {
+      // 8 caller bits -> 8 bytes of 0 / 1 (bit k to byte k), ANDed into valid.
+      const uint64_t bits8 = (valid_bits[i >> 6] >> (i & 63)) & 0xffu;
+      uint64_t spread = (bits8 * 0x0101010101010101ull) & 0x8040201008040201ull;
+      spread = ((spread + 0x7f7f7f7f7f7f7f7full) >> 7) & 0x0101010101010101ull;
+      uint64_t chunk;
+      std::memcpy(&chunk, valid + i, 8);
+      chunk &= spread;
+      std::memcpy(valid + i, &chunk, 8);
     }
   }
   for (int i = 0; i < n_samples; ++i) {
@@ -485,60 +879,111 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
   out.samples_used = valid_count;
   if (valid_count < kN) return out;
   const float* weights = weights_.data();
+  const bool all_valid = valid_count == n_samples;
+  // Validity as bits (the cache key) and the list of the inactive samples (valid = active here).
+  uint64_t key[kMaskWords] = {};
+  int inactive_index[kMaxSamples];
+  int inactive = 0;
+  if (!all_valid) {
+    for (int i = 0; i < stride; i += 8) {  // 8 bytes of 0 / 1 -> 8 bits (byte k to bit k)
+      uint64_t chunk;
+      std::memcpy(&chunk, valid + i, 8);
+      key[i >> 6] |= ((chunk * 0x0102040810204080ull) >> 56) << (i & 63);
+    }
+    for (int w = 0; w * 64 < n_samples; ++w) {
+      const int left = n_samples - w * 64;
+      uint64_t bits = ~key[w] & (left >= 64 ? ~uint64_t{0} : (uint64_t{1} << left) - 1);
+      for (; bits != 0; bits &= bits - 1)
+        inactive_index[inactive++] = w * 64 + std::countr_zero(bits);
+    }
+    // Zero the invalid values (garbage or NaN): T^T W v over the valid set is then a plain dot
+    // product over all samples.
+    for (int j = 0; j < inactive; ++j) {
+      for (int c = 0; c < channels; ++c) v[c][inactive_index[j]] = 0;
+      mean_value[inactive_index[j]] = 0;
+    }
+  }
 
   double e[3][kN] = {};
   std::array<double, 81> factor{};
   double rhs[3][kN] = {};
-  // Weighted normal equations over the active set: factor = L of (T^T W T + R), rhs = T^T W v.
-  const auto build = [&]() -> bool {
-    int inactive = 0;
-    for (int i = 0; i < n_samples; ++i) inactive += !active[i];
-    if (2 * inactive < n_samples) {  // downdate the precomputed full-set matrix
-      factor = normal_;
-      for (int i = 0; i < n_samples; ++i) {
-        if (active[i]) continue;
-        const float* t = &rtf_[i * kN];
-        const double w = weights_[i];
-        for (int a = 0; a < kN; ++a) {
-          for (int b = 0; b <= a; ++b) factor[a * kN + b] -= w * t[a] * t[b];
-        }
-      }
-    } else {
-      factor = prior_;
-      for (int i = 0; i < n_samples; ++i) {
-        if (!active[i]) continue;
-        const float* t = &rtf_[i * kN];
-        const double w = weights[i];
-        for (int a = 0; a < kN; ++a) {
-          for (int b = 0; b <= a; ++b) factor[a * kN + b] += w * t[a] * t[b];
-        }
-      }
+  const auto collect_inactive = [&]() {  // after the active set changed (robust)
+    inactive = 0;
+    for (int i = 0; i < n_samples; ++i) {  // branch-free compaction
+      inactive_index[inactive] = i;
+      inactive += !active[i];
     }
-    // rhs = T^T W v over the active samples: 8-lane dot products of the transposed weighted
-    // RTFs with the intensities, inactive ones zeroed.
-    alignas(32) float masked[kMaxSamples + 8];
-    for (int c = 0; c < channels; ++c) {
-      for (int i = 0; i < stride; ++i) masked[i] = i < n_samples && active[i] ? v[c][i] : 0.0f;
-      for (int n = 0; n < kN; ++n) {
-        rhs[c][n] = Dot8(&wrtf_t_[static_cast<size_t>(n) * stride], masked, stride);
+  };
+  // factor = L of the weighted normal matrix over the active set, T^T W T + R: the precomputed
+  // full-set matrix downdated by the inactive samples (rebuilt if more than half are inactive).
+  const auto build_factor = [&]() -> bool {
+    if (2 * inactive < n_samples) {
+      factor = normal_;
+      RankUpdate(factor.data(), kN, wrtf_d_.data(), rtf_d_.data(), inactive_index, inactive, -1);
+    } else {
+      int active_index[kMaxSamples];
+      int count = 0;
+      for (int i = 0; i < n_samples; ++i) {
+        active_index[count] = i;
+        count += active[i];
       }
+      factor = prior_;
+      RankUpdate(factor.data(), kN, wrtf_d_.data(), rtf_d_.data(), active_index, count, 1);
     }
     return internal::Cholesky<9>(factor);
   };
-  const auto solve = [&]() {
+  // rhs = T^T W v over the active samples: dot products (double accumulation) of the transposed
+  // weighted RTFs with the intensities, inactive ones zeroed (already, unless mask).
+  const auto build_rhs = [&](bool mask) {
+    alignas(32) float masked[kMaxSamples + 8];
     for (int c = 0; c < channels; ++c) {
-      std::copy(rhs[c], rhs[c] + kN, e[c]);
-      internal::CholeskySolve<9>(factor, e[c]);
+      const float* source = v[c];
+      if (mask) {
+        for (int i = 0; i < stride; ++i) masked[i] = i < n_samples && active[i] ? v[c][i] : 0.0f;
+        source = masked;
+      }
+      DotDRows(wrtf_td_.data(), kN, source, stride, rhs[c]);
     }
   };
+  const auto build = [&]() -> bool {
+    collect_inactive();
+    if (!build_factor()) return false;
+    build_rhs(true);
+    return true;
+  };
+  const auto solve = [&]() {
+    for (int c = 0; c < channels; ++c) std::copy(rhs[c], rhs[c] + kN, e[c]);
+    CholeskySolve9Multi(factor, e, channels);
+  };
 
-  const bool fast = valid_count == n_samples && !options_.robust && !options_.non_negative;
+  const bool plain = !options_.robust && !options_.non_negative;
+  const bool fast = all_valid && plain;
+  MaskData mask_data;  // plain solve with invalid samples: per-mask data (cached)
   if (fast) {
     // E = pinv v: precomputed pseudo-inverse of the full valid set (eq. 19).
-    for (int c = 0; c < channels; ++c) {
-      for (int n = 0; n < kN; ++n)
-        e[c][n] = Dot8(&pinv_[static_cast<size_t>(n) * stride], v[c], stride);
+    for (int c = 0; c < channels; ++c) Dot8Rows(pinv_.data(), kN, v[c], stride, e[c]);
+  } else if (plain) {
+    // Everything that depends on the validity mask only: from the cache, or computed (and
+    // stored). The values are bit-identical either way.
+    if (!(cache_ && cache_->Lookup(key, mask_data))) {
+      mask_data.factor_ok = build_factor();
+      mask_data.factor = factor;
+      mask_data.dir_ready = false;
+      if (mask_data.factor_ok && options_.directional_fit && !dir_rtf_.empty()) {
+        const int dn = dir_n_;
+        std::copy(dir_normal_.begin(), dir_normal_.end(), mask_data.dir_m);
+        RankUpdate(mask_data.dir_m, dn, dir_wrtf_d_.data(), dir_rtf_d_.data(), inactive_index,
+                   inactive, -1);
+        GridTables(mask_data.dir_m, dn, dir_grid_basis_t_.data(), dir_grid_.size(), mask_data.syy,
+                   mask_data.s0y);
+        mask_data.dir_ready = true;
+      }
+      if (cache_) cache_->Store(key, mask_data);
     }
+    if (!mask_data.factor_ok) return out;
+    factor = mask_data.factor;
+    build_rhs(false);
+    solve();
   } else {
     if (!build()) return out;
     solve();
@@ -650,40 +1095,41 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
       }
     } else {
       // b = T^T W v over the active samples (8-lane dot products of the transposed weighted
-      // RTFs); M = the full-set matrix downdated by the inactive samples.
-      if (all_active && !(options_.directional_robust > 0)) {
-        cost_matrix = dir_normal_.data();  // used as it is
+      // RTFs); M = the full-set matrix downdated by the inactive samples (per mask, cached).
+      const double* full = all_active            ? dir_normal_.data()
+                           : mask_data.dir_ready ? mask_data.dir_m
+                                                 : nullptr;
+      if (full && !(options_.directional_robust > 0)) {
+        cost_matrix = full;  // used as it is
+      } else if (full) {
+        std::copy(full, full + dn * dn, m);
       } else {
         std::copy(dir_normal_.begin(), dir_normal_.end(), m);
+        collect_inactive();
+        RankUpdate(m, dn, dir_wrtf_d_.data(), dir_rtf_d_.data(), inactive_index, inactive, -1);
       }
-      const float* source = mean_value;
+      const float* source = mean_value;  // invalid samples zeroed
       alignas(32) float masked[kMaxSamples + 8];
-      if (!all_active) {
+      if (!all_active && options_.robust) {
         for (int i = 0; i < stride; ++i) masked[i] = i < n_samples && active[i] ? mean_value[i] : 0;
         source = masked;
-        for (int i = 0; i < n_samples; ++i) {
-          if (active[i]) continue;
-          const float* t = &dir_rtf_[static_cast<size_t>(i) * dn];
-          const double w = weights[i];
-          for (int a = 0; a < dn; ++a) {
-            const double wt = w * double(t[a]);
-            for (int k = 0; k <= a; ++k) m[a * dn + k] -= wt * t[k];
-          }
-        }
-        for (int a = 0; a < dn; ++a) {
-          for (int k = 0; k < a; ++k) m[k * dn + a] = m[a * dn + k];
-        }
       }
-      for (int a = 0; a < dn; ++a) {
-        b[a] = Dot8(&dir_wrtf_t_[static_cast<size_t>(a) * stride], source, stride);
-      }
+      Dot8Rows(dir_wrtf_t_.data(), dn, source, stride, b);
     }
     // With every sample active M is the full-set matrix: the grids' quadratic terms are
     // precomputed.
-    const DirectionalProblem problem{
-        cost_matrix, b, dir_bands_, dn, options_.directional_ambient, &Constants(), all_active};
+    // With a downdated M of the cached kind, the mask data holds them.
+    const bool mask_tables = !all_active && mask_data.dir_ready && !dir_rtf_.empty();
+    const DirectionalProblem problem{cost_matrix,
+                                     b,
+                                     dir_bands_,
+                                     dn,
+                                     options_.directional_ambient,
+                                     &Constants(),
+                                     all_active || mask_tables};
     const DirectionGrid grid{dir_grid_, dir_grid_basis_.data(), dir_grid_basis_t_.data(),
-                             dir_grid_syy_.data(), dir_grid_s0y_.data()};
+                             mask_tables ? mask_data.syy : dir_grid_syy_.data(),
+                             mask_tables ? mask_data.s0y : dir_grid_s0y_.data()};
     const sh::Vec3 init = direction == sh::Vec3{0, 0, 0} ? sh::Vec3{0, 0, -1} : direction;
     double power = 0, ambient = 0;
     sh::Vec3 fitted =
@@ -743,19 +1189,21 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     // Unit weights, e = N^-1 r with N = T^T T + R and r = T^T v over the active samples (the
     // full set: r = N e), so |v - T e|^2 = v^T v - 2 e^T r + e^T (N - R) e
     // = v^T v - e^T r - e^T R e (channel mean: the same with the mean intensities, light and r).
+    // The channel mean in double (the float mean_value would not match the exact r = T^T v to
+    // the precision this difference needs; the fast path's pseudo-inverse is float anyway);
+    // invalid and padding values are zero.
     double lane_sum[4] = {}, lane_sq[4] = {};  // independent lanes: the loop vectorises
-    const int whole = n_samples / 4 * 4;
-    for (int i = 0; i < whole; i += 4) {
+    const double inv_channels = 1.0 / channels;
+    for (int i = 0; i < stride; i += 4) {
       for (int l = 0; l < 4; ++l) {
-        const double x = active[i + l] ? double(mean_value[i + l]) : 0.0;
+        const double x =
+            fast ? double(mean_value[i + l])
+            : channels == 3
+                ? (double(v[0][i + l]) + double(v[1][i + l]) + double(v[2][i + l])) * inv_channels
+                : double(v[0][i + l]);
         lane_sum[l] += x;
         lane_sq[l] += x * x;
       }
-    }
-    for (int i = whole; i < n_samples; ++i) {
-      const double x = active[i] ? double(mean_value[i]) : 0.0;
-      lane_sum[0] += x;
-      lane_sq[0] += x * x;
     }
     const double sum = (lane_sum[0] + lane_sum[1]) + (lane_sum[2] + lane_sum[3]);
     const double sum_sq = (lane_sq[0] + lane_sq[1]) + (lane_sq[2] + lane_sq[3]);

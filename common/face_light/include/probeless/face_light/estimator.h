@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <vector>
 
@@ -58,6 +59,11 @@ struct EstimatorOptions {
   bool use_direction_rtfs = true;
   // Tikhonov weight (relative to the mean diagonal) added to the direction RTFs' normal matrix.
   double direction_ridge = 1e-3;
+  // With invalid samples (and neither robust nor non_negative): least-recently-used cache of this
+  // many validity masks (0..64, 0 = off) holding the downdated 9 x 9 Cholesky factor and, for the
+  // directional fit, its downdated cost matrix and the start grid's quadratic terms. A steady face
+  // changes its mask rarely; a hit skips the downdates. Results are bit-identical with and without.
+  int mask_cache = 4;
 };
 
 // One estimated light in the light frame (model.h). Units: albedo-normalised image intensity per
@@ -82,13 +88,17 @@ struct LightEstimate {
 };
 
 // Estimates lights from the samples of one model. Construction precomputes the pseudo-inverse for
-// the full valid set and the prior matrices; Estimate* are const, allocation-free and thread-safe.
+// the full valid set and the prior matrices; Estimate* are const, allocation-free and thread-safe
+// (the per-mask cache is guarded by a mutex that is never waited for: a busy cache is bypassed).
 class FaceLightEstimator {
  public:
   // Throws FaceLightError if the model is invalid or options are out of range (negative weights,
   // robust_iterations outside 1..20, robust_threshold <= 0, nn_directions outside 9..1024,
-  // nn_iterations outside 1..10000).
+  // nn_iterations outside 1..10000, mask_cache outside 0..64).
   explicit FaceLightEstimator(const FaceLightModel& model, EstimatorOptions options = {});
+  ~FaceLightEstimator();
+  FaceLightEstimator(FaceLightEstimator&&) noexcept;
+  FaceLightEstimator& operator=(FaceLightEstimator&&) noexcept;
 
   int SampleCount() const { return sample_count_; }
   const EstimatorOptions& Options() const { return options_; }
@@ -122,6 +132,7 @@ class FaceLightEstimator {
   int stride_ = 0;                   // sample count rounded up to a multiple of 8
   std::vector<float> rtf_t_;         // [n * stride_ + i] (transposed, zero padded)
   std::vector<float> wrtf_t_;        // the same times the sample weights
+  std::vector<double> wrtf_td_;      // wrtf_t_ in double (the exact right-hand sides)
   std::vector<float> pinv_;          // [n * stride_ + i], (T^T W T + R)^-1 T^T W (full set), padded
   std::vector<float> weights_;       // per-sample weight (1 or training-residual based)
   std::array<double, 81> normal_{};  // T^T W T + R (full valid set)
@@ -142,6 +153,11 @@ class FaceLightEstimator {
   std::vector<double> dir_grid_syy_;
   std::vector<double> dir_grid_s0y_;
   bool uniform_weights_ = true;  // every weight is 1 (weight_floor = 0)
+  // Double copies for the downdates: [i * 9 + n] = t_in and w_i t_in; [i * dir_n_ + a] the same
+  // for the RTFs of the directional fit.
+  std::vector<double> rtf_d_, wrtf_d_, dir_rtf_d_, dir_wrtf_d_;
+  struct MaskCache;
+  std::unique_ptr<MaskCache> cache_;  // per validity mask (EstimatorOptions::mask_cache)
 };
 
 // Writes an estimate into an msgs::ShLight (bands = 3, coefficients, dominant_direction,
