@@ -9,6 +9,7 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -235,6 +236,37 @@ TEST(ShTest, RenderLatLongEvaluatesEveryPixel) {
   const std::array<double, 2> ae = AzimuthElevation(LatLongDirection(u, v, 32, 16));
   EXPECT_NEAR(ae[0], 0.5, 0.2);
   EXPECT_NEAR(ae[1], 0.3, 0.2);
+}
+
+TEST(ShTest, WeightedBasisWithTheNormalisationIsTheBasis) {
+  const std::array<double, 25> k = BasisNormalisation();
+  std::array<float, 25> kf{}, half{};
+  for (int i = 0; i < 25; ++i) {
+    kf[i] = static_cast<float>(k[i]);
+    half[i] = static_cast<float>(0.5 * k[i]);
+  }
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal;
+  for (int trial = 0; trial < 50; ++trial) {
+    Vec3 d{normal(rng), normal(rng), normal(rng)};
+    const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (double& v : d) v /= len;
+    const std::vector<double> expected = Basis(5, d);
+    double y[25];
+    EvaluateWeightedBasis<5, false>(k.data(), d[0], d[1], d[2], y);
+    for (int i = 0; i < 25; ++i) ASSERT_NEAR(y[i], expected[i], 1e-12) << i;
+    double y3[9];
+    EvaluateWeightedBasis<3, false>(k.data(), d[0], d[1], d[2], y3);
+    for (int i = 0; i < 9; ++i) ASSERT_NEAR(y3[i], expected[i], 1e-12) << i;
+    // Accumulate, in float, with per-entry factors: adds 0.5 Y to what is there.
+    float acc[16];
+    for (int i = 0; i < 16; ++i) acc[i] = 1.0f;
+    const float fx = static_cast<float>(d[0]), fy = static_cast<float>(d[1]),
+                fz = static_cast<float>(d[2]);
+    EvaluateWeightedBasis<4, true>(half.data(), fx, fy, fz, acc);
+    for (int i = 0; i < 16; ++i) ASSERT_NEAR(acc[i], 1.0 + 0.5 * expected[i], 2e-6) << i;
+  }
+  EXPECT_EQ(k[Index(0, 0)], 0.5 / std::sqrt(std::numbers::pi));
 }
 
 TEST(ShTest, BadArgumentsThrowOneLineMessages) {

@@ -231,20 +231,9 @@ struct MaskData {
   double syy[kMaxGrid], s0y[kMaxGrid];
 };
 
-// Normalisation constants of sh::EvaluateBasis for bands <= 5, index l(l+1)+m for m >= 0:
-// sqrt((2l+1)/(4 pi) (l-m)!/(l+m)!), times sqrt(2) for m > 0.
+// Normalisation constants of sh::EvaluateBasis for bands <= 5 (sh::BasisNormalisation).
 struct BasisConstants {
-  double k[kMaxDirN] = {};
-  BasisConstants() {
-    for (int l = 0; l < 5; ++l) {
-      for (int m = 0; m <= l; ++m) {
-        double ratio = 1;
-        for (int f = l - m + 1; f <= l + m; ++f) ratio /= f;
-        const double k_lm = std::sqrt((2 * l + 1) / (4 * std::numbers::pi) * ratio);
-        k[l * (l + 1) + m] = m == 0 ? k_lm : std::numbers::sqrt2 * k_lm;
-      }
-    }
-  }
+  std::array<double, 25> k = sh::BasisNormalisation();
 };
 
 const BasisConstants& Constants() {
@@ -252,50 +241,22 @@ const BasisConstants& Constants() {
   return constants;
 }
 
-// sh::EvaluateBasis<double> (same recurrence, same convention) with the normalisation constants
-// precomputed: the directional fit evaluates it ~50 times per estimate.
-// Bands > 0: that many bands, fixed (the loops unroll completely); 0: runtime_bands.
-template <int Bands>
-void FastBasisImpl(const BasisConstants& constants, int runtime_bands, double x, double y, double z,
-                   double* out) {
-  const int bands = Bands > 0 ? Bands : runtime_bands;
-  double c = 1, s = 0;  // Re and Im of (x + i y)^m
-  double q_mm = 1;      // (-1)^m (2m-1)!!
-  for (int m = 0; m < bands; ++m) {
-    if (m > 0) {
-      const double c_next = c * x - s * y;
-      s = c * y + s * x;
-      c = c_next;
-      q_mm *= -static_cast<double>(2 * m - 1);
-    }
-    double q_prev2 = 0, q_prev = 0;
-    for (int l = m; l < bands; ++l) {
-      double q;
-      if (l == m) {
-        q = q_mm;
-      } else if (l == m + 1) {
-        q = z * (2 * m + 1) * q_prev;
-      } else {
-        q = ((2 * l - 1) * z * q_prev - (l + m - 1) * q_prev2) / (l - m);
-      }
-      const double scaled = constants.k[l * (l + 1) + m] * q;
-      if (m == 0) {
-        out[l * (l + 1)] = scaled;
-      } else {
-        out[l * (l + 1) + m] = scaled * c;
-        out[l * (l + 1) - m] = scaled * s;
-      }
-      q_prev2 = q_prev;
-      q_prev = q;
-    }
-  }
-}
-
+// sh::EvaluateBasis<double> with the normalisation precomputed (sh::EvaluateWeightedBasis): the
+// directional fit evaluates it ~50 times per estimate.
 void FastBasis(const BasisConstants& constants, int bands, double x, double y, double z,
                double* out) {
-  if (bands == 5) return FastBasisImpl<5>(constants, 5, x, y, z, out);
-  if (bands == 3) return FastBasisImpl<3>(constants, 3, x, y, z, out);
-  FastBasisImpl<0>(constants, bands, x, y, z, out);
+  switch (bands) {
+    case 1:
+      return sh::EvaluateWeightedBasis<1, false>(constants.k.data(), x, y, z, out);
+    case 2:
+      return sh::EvaluateWeightedBasis<2, false>(constants.k.data(), x, y, z, out);
+    case 3:
+      return sh::EvaluateWeightedBasis<3, false>(constants.k.data(), x, y, z, out);
+    case 4:
+      return sh::EvaluateWeightedBasis<4, false>(constants.k.data(), x, y, z, out);
+    default:
+      return sh::EvaluateWeightedBasis<5, false>(constants.k.data(), x, y, z, out);
+  }
 }
 
 // For a symmetric 25 x 25 M (row-major) and y, b: y^T M y, (M y)_0 and b^T y. M y as a sum of

@@ -122,74 +122,31 @@ TransferComputer::TransferComputer(const TransferOptions& options)
   for (auto& o : offsets_) {
     o = 0.1f + 0.9f * static_cast<float>(static_cast<double>(rng() >> 11) / 9007199254740992.0);
   }
-  // (A_l / pi) times the normalisation of Y_lm as sh::EvaluateBasis computes it (sqrt(2) for
-  // m != 0), so that AddClampedCosine needs no square roots per pixel.
+  // (A_l / pi) times the normalisation of Y_lm (sh::BasisNormalisation), so that
+  // AddClampedCosine needs no square roots per pixel.
   const int bands = directions_.bands();
+  const std::array<double, 25> k = sh::BasisNormalisation();
   for (int l = 0; l < bands; ++l) {
-    double ratio = 1;  // (l - m)! / (l + m)!
+    const double a = sh::ClampedCosineCoefficient(l) / std::numbers::pi;
     for (int m = 0; m <= l; ++m) {
-      if (m > 0) ratio /= static_cast<double>((l + m) * (l - m + 1));
-      const double k_lm = std::sqrt((2 * l + 1) / (4 * std::numbers::pi) * ratio);
-      const double a = sh::ClampedCosineCoefficient(l) / std::numbers::pi;
-      clamped_[l * (l + 1) + m] = static_cast<float>(a * k_lm * (m > 0 ? std::numbers::sqrt2 : 1));
+      clamped_[l * (l + 1) + m] = static_cast<float>(a * k[l * (l + 1) + m]);
     }
   }
 }
-
-namespace {
-
-// out[k] += clamped[l (l + 1) + |m|] * Q_l^m(z) * (1, Re or Im of (x + i y)^m): the recurrence of
-// sh::EvaluateBasis (Q_l^m = P_l^m(z) / sin^m, Condon-Shortley phase) in float, unrolled for a
-// compile-time band count.
-template <int kBands>
-inline void AddClampedCosineFixed(const float* clamped, float x, float y, float z, float* out) {
-  float c = 1, s = 0, q_mm = 1;
-  for (int m = 0; m < kBands; ++m) {
-    if (m > 0) {
-      const float c_next = c * x - s * y;
-      s = c * y + s * x;
-      c = c_next;
-      q_mm *= -static_cast<float>(2 * m - 1);
-    }
-    float q_prev2 = 0, q_prev = 0;
-    for (int l = m; l < kBands; ++l) {
-      float q;
-      if (l == m) {
-        q = q_mm;
-      } else if (l == m + 1) {
-        q = z * static_cast<float>(2 * m + 1) * q_prev;
-      } else {
-        q = (static_cast<float>(2 * l - 1) * z * q_prev - static_cast<float>(l + m - 1) * q_prev2) *
-            (1.0f / static_cast<float>(l - m));
-      }
-      const float v = clamped[l * (l + 1) + m] * q;
-      if (m == 0) {
-        out[l * (l + 1)] += v;
-      } else {
-        out[l * (l + 1) + m] += v * c;
-        out[l * (l + 1) - m] += v * s;
-      }
-      q_prev2 = q_prev;
-      q_prev = q;
-    }
-  }
-}
-
-}  // namespace
 
 void TransferComputer::AddClampedCosine(float x, float y, float z, float* out) const {
   // clamped_ holds (A_l / pi) times the Y_lm normalisation at indices l (l + 1) + m, m >= 0.
   switch (directions_.bands()) {
     case 1:
-      return AddClampedCosineFixed<1>(clamped_.data(), x, y, z, out);
+      return sh::EvaluateWeightedBasis<1, true>(clamped_.data(), x, y, z, out);
     case 2:
-      return AddClampedCosineFixed<2>(clamped_.data(), x, y, z, out);
+      return sh::EvaluateWeightedBasis<2, true>(clamped_.data(), x, y, z, out);
     case 3:
-      return AddClampedCosineFixed<3>(clamped_.data(), x, y, z, out);
+      return sh::EvaluateWeightedBasis<3, true>(clamped_.data(), x, y, z, out);
     case 4:
-      return AddClampedCosineFixed<4>(clamped_.data(), x, y, z, out);
+      return sh::EvaluateWeightedBasis<4, true>(clamped_.data(), x, y, z, out);
     default:
-      return AddClampedCosineFixed<5>(clamped_.data(), x, y, z, out);
+      return sh::EvaluateWeightedBasis<5, true>(clamped_.data(), x, y, z, out);
   }
 }
 

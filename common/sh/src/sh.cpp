@@ -34,6 +34,19 @@ std::vector<double> Basis(int bands, const Vec3& d) {
   return y;
 }
 
+std::array<double, 25> BasisNormalisation() {
+  std::array<double, 25> k{};
+  for (int l = 0; l < 5; ++l) {
+    double ratio = 1;  // (l - m)! / (l + m)!
+    for (int m = 0; m <= l; ++m) {
+      if (m > 0) ratio /= static_cast<double>((l + m) * (l - m + 1));
+      const double k_lm = std::sqrt((2 * l + 1) / (4 * std::numbers::pi) * ratio);
+      k[l * (l + 1) + m] = m == 0 ? k_lm : std::numbers::sqrt2 * k_lm;
+    }
+  }
+  return k;
+}
+
 double ClampedCosineCoefficient(int l) {
   constexpr double kPi = std::numbers::pi;
   if (l == 0) return kPi;

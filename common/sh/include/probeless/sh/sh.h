@@ -111,6 +111,60 @@ inline void EvaluateBasis(int bands, T x, T y, T z, T* out) {
   }
 }
 
+// The normalisation EvaluateBasis applies, per band l and order m >= 0 at index l (l + 1) + m:
+// K_l^m = sqrt((2l + 1) / (4 pi) (l - m)! / (l + m)!), times sqrt(2) for m > 0 (real basis).
+// Entries for l >= 5 are 0. Multiply it by per-band factors (e.g. A_l, ClampedCosineCoefficient)
+// to get the `weight` of EvaluateWeightedBasis.
+std::array<double, 25> BasisNormalisation();
+
+// The hot-path form of EvaluateBasis for a compile-time band count (1..5; the loops unroll): the
+// same recurrence and convention, with the normalisation (and any per-(l, |m|) factor) taken from
+// weight[l (l + 1) + m], m >= 0. With Accumulate, adds to out instead of writing:
+//   out[Index(l, 0)] (+)= w_l0 Q_l^0,  out[Index(l, +-m)] (+)= w_lm Q_l^m (Re, Im of (x + i y)^m).
+// weight = BasisNormalisation() gives EvaluateBasis's values (to rounding).
+template <int Bands, bool Accumulate, typename T>
+inline void EvaluateWeightedBasis(const T* weight, T x, T y, T z, T* out) {
+  static_assert(Bands >= 1 && Bands <= 5, "EvaluateWeightedBasis: 1..5 bands");
+  T c = 1, s = 0;  // Re and Im of (x + i y)^m
+  T q_mm = 1;      // Q_m^m = (-1)^m (2m-1)!!
+  for (int m = 0; m < Bands; ++m) {
+    if (m > 0) {
+      const T c_next = c * x - s * y;
+      s = c * y + s * x;
+      c = c_next;
+      q_mm *= -static_cast<T>(2 * m - 1);
+    }
+    T q_prev2 = 0, q_prev = 0;
+    for (int l = m; l < Bands; ++l) {
+      T q;
+      if (l == m) {
+        q = q_mm;
+      } else if (l == m + 1) {
+        q = z * static_cast<T>(2 * m + 1) * q_prev;
+      } else {
+        q = (static_cast<T>(2 * l - 1) * z * q_prev - static_cast<T>(l + m - 1) * q_prev2) *
+            (T(1) / static_cast<T>(l - m));
+      }
+      const T v = weight[l * (l + 1) + m] * q;
+      if (m == 0) {
+        if constexpr (Accumulate) {
+          out[l * (l + 1)] += v;
+        } else {
+          out[l * (l + 1)] = v;
+        }
+      } else if constexpr (Accumulate) {
+        out[l * (l + 1) + m] += v * c;
+        out[l * (l + 1) - m] += v * s;
+      } else {
+        out[l * (l + 1) + m] = v * c;
+        out[l * (l + 1) - m] = v * s;
+      }
+      q_prev2 = q_prev;
+      q_prev = q;
+    }
+  }
+}
+
 // Y_0..Y_{bands^2-1} at unit direction d. Throws ShError unless 1 <= bands <= 5.
 std::vector<double> Basis(int bands, const Vec3& d);
 
