@@ -138,6 +138,59 @@ TEST(DepthMerge, SmoothingIsAJointBilateralMedianAndDenoisingASmallMedian) {
   EXPECT_FLOAT_EQ(out.denoised.At(5, 2), 2.0f);
 }
 
+// A foreground object (1 m) over a background (2 m) of the same grey, so the intensity gate
+// cannot separate them: the object's convex corner at (10, 10) sees 9 of its 25 D'' samples (and
+// 4 of its 9 D''' samples) on the object. The depth gate keeps every pixel's depth, the corner's
+// too; the paper's plain medians (eq. 4 / 5) hand the corner to the background's majority.
+TEST(DepthMerge, DepthGateKeepsAnObjectsDepthAtItsSilhouette) {
+  DepthImage raw, volume;
+  GreyImage grey;
+  raw.Resize(21, 21);
+  volume.Resize(21, 21);
+  grey.Resize(21, 21);
+  std::fill(grey.data.begin(), grey.data.end(), 100);
+  for (int y = 0; y < 21; ++y)
+    for (int x = 0; x < 21; ++x) raw.At(x, y) = (x >= 10 && y >= 10) ? 1.0f : 2.0f;
+  raw.At(15, 15) = 1.3f;  // an isolated outlier on the object: no support, voted out
+  MergedDepth out;
+  MergeDepth(raw, volume, grey, MergeOptions{}, out, nullptr);
+  for (int y = 0; y < 21; ++y)
+    for (int x = 0; x < 21; ++x) {
+      const float want = (x >= 10 && y >= 10) ? 1.0f : 2.0f;
+      EXPECT_FLOAT_EQ(out.smoothed.At(x, y), want) << x << "," << y;
+      EXPECT_FLOAT_EQ(out.denoised.At(x, y), want) << x << "," << y;
+    }
+  MergeOptions paper;
+  paper.depth_gated_medians = false;
+  MergeDepth(raw, volume, grey, paper, out, nullptr);
+  EXPECT_FLOAT_EQ(out.smoothed.At(10, 10), 2.0f);
+  EXPECT_FLOAT_EQ(out.denoised.At(10, 10), 2.0f);
+}
+
+// Measured depth on a noisy surface (steps up to 4 cm, within lambda_D = 5 cm of each other but
+// spanning 8 cm) is one cluster: the depth gate must not stop the median from denoising it.
+TEST(DepthMerge, DepthGateStillDenoisesASurfaceNoisierThanLambdaD) {
+  DepthImage raw, volume;
+  GreyImage grey;
+  raw.Resize(15, 15);
+  volume.Resize(15, 15);
+  grey.Resize(15, 15);
+  std::fill(grey.data.begin(), grey.data.end(), 100);
+  const float offsets[3] = {-0.04f, 0.0f, 0.04f};
+  for (int y = 0; y < 15; ++y)
+    for (int x = 0; x < 15; ++x) raw.At(x, y) = 3.0f + offsets[(x + y) % 3];
+  MergedDepth gated, plain;
+  MergeDepth(raw, volume, grey, MergeOptions{}, gated, nullptr);
+  MergeOptions paper;
+  paper.depth_gated_medians = false;
+  MergeDepth(raw, volume, grey, paper, plain, nullptr);
+  EXPECT_EQ(gated.smoothed.data, plain.smoothed.data);
+  EXPECT_EQ(gated.denoised.data, plain.denoised.data);
+  // (7, 7) = 3.04 is 4 cm off; its D'' window holds 8 or 9 samples of each level: median 3.00.
+  EXPECT_FLOAT_EQ(raw.At(7, 7), 3.04f);
+  EXPECT_FLOAT_EQ(gated.smoothed.At(7, 7), 3.0f);
+}
+
 TEST(DepthMerge, RejectsMismatchedSizes) {
   Inputs in(1, 1, 1);
   DepthImage small;
@@ -175,6 +228,27 @@ float RefMedian(std::vector<float> v) {
 struct Win {
   int half, stride;
 };
+// The depth gate of D'' / D''' (depth_merge.h): the samples linked to the valid centre by depth
+// steps < lambda_D (walking the sorted samples outwards from the centre) when they are at least
+// a quarter of all, else all.
+std::vector<float> RefGate(std::vector<float> s, float centre, const MergeOptions& o) {
+  if (!o.depth_gated_medians || !(centre > 0)) return s;
+  std::sort(s.begin(), s.end());
+  float lo = centre, hi = centre;
+  for (auto it = std::lower_bound(s.begin(), s.end(), centre); it != s.end(); ++it) {
+    if (!(*it < hi + o.lambda_d_m)) break;
+    hi = std::max(hi, *it);
+  }
+  for (auto it = std::upper_bound(s.begin(), s.end(), centre); it != s.begin();) {
+    --it;
+    if (!(*it > lo - o.lambda_d_m)) break;
+    lo = std::min(lo, *it);
+  }
+  std::vector<float> cluster;
+  for (float d : s)
+    if (d >= lo && d <= hi) cluster.push_back(d);
+  return 4 * cluster.size() >= s.size() ? cluster : s;
+}
 Win RefWindow(int k) {
   const int half = k / 2;
   if (half <= 2) return {half, 1};
@@ -198,8 +272,9 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float dc = raw.At(x, y), dv = vol.At(x, y);
-      if (dc > 0) {
-        out.merged.At(x, y) = (dv > 0 && std::fabs(dc - dv) <= o.lambda_d_m) ? dv : dc;
+      const bool agrees = dv > 0 && std::fabs(dc - dv) <= o.lambda_d_m;
+      if (dc > 0 && !(agrees && o.volume_needs_majority)) {
+        out.merged.At(x, y) = agrees ? dv : dc;
         continue;
       }
       std::vector<float> omega_i;
@@ -211,6 +286,10 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
           if (vol.At(xx, yy) > 0 && std::fabs(dq - vol.At(xx, yy)) < o.lambda_d_m) ++omega_d;
         }
       });
+      if (dc > 0) {
+        out.merged.At(x, y) = 2 * omega_d >= static_cast<int>(omega_i.size()) ? dv : dc;
+        continue;
+      }
       out.merged.At(x, y) = omega_i.empty() ? 0
                             : (dv > 0 && 2 * omega_d >= static_cast<int>(omega_i.size()))
                                 ? dv
@@ -223,7 +302,7 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
         const float d = out.merged.At(xx, yy);
         if (d > 0 && std::abs(grey.At(x, y) - grey.At(xx, yy)) < o.smooth_lambda_i) s.push_back(d);
       });
-      out.smoothed.At(x, y) = RefMedian(s);
+      out.smoothed.At(x, y) = RefMedian(RefGate(s, raw.At(x, y) > 0 ? out.merged.At(x, y) : 0, o));
     }
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -231,7 +310,8 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
       window(x, y, RefWindow(o.denoise_k), [&](int xx, int yy) {
         if (out.smoothed.At(xx, yy) > 0) s.push_back(out.smoothed.At(xx, yy));
       });
-      out.denoised.At(x, y) = RefMedian(s);
+      out.denoised.At(x, y) =
+          RefMedian(RefGate(s, raw.At(x, y) > 0 ? out.smoothed.At(x, y) : 0, o));
     }
   return out;
 }
@@ -254,7 +334,15 @@ TEST(DepthMerge, MatchesTheStraightforwardEquationsOnRandomInputs) {
           pct(rng) < holes_pct / 2 ? 0.0f : (pct(rng) < 50 ? raw.data[i] + 0.01f : depth(rng));
       g.data[i] = static_cast<uint8_t>(grey(rng));
     }
-    for (MergeOptions o : {MergeOptions{}, SmallWindows()}) {
+    // lambda_D = 1 cm splits the random depths into many clusters (the gate's both branches).
+    MergeOptions fine, fine_small = SmallWindows();
+    fine.lambda_d_m = fine_small.lambda_d_m = 0.01f;
+    fine.volume_needs_majority = fine_small.volume_needs_majority = true;
+    MergeOptions paper_exact, paper_exact_small = SmallWindows();
+    paper_exact.depth_gated_medians = paper_exact_small.depth_gated_medians = false;
+    paper_exact.volume_needs_majority = paper_exact_small.volume_needs_majority = false;
+    for (MergeOptions o :
+         {MergeOptions{}, SmallWindows(), fine, fine_small, paper_exact, paper_exact_small}) {
       ThreadPool pool(2);
       MergedDepth got;
       MergeDepth(raw, vol, g, o, got, &pool);

@@ -22,14 +22,18 @@
 // only. The default volume is the library's (256^3 over 2 m, see recon::VolumeOptions).
 // Tuning knobs for experiments (environment): FUSION_EVAL_ICP=a,b,c (iterations),
 // FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m), FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m),
-// FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_DEPTH_SCALE (multiplies the
-// depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy).
+// FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_MERGE_GATE /
+// FUSION_EVAL_MERGE_MAJORITY (0 = the paper's eq. 3-5 exactly), FUSION_EVAL_DEPTH_SCALE (multiplies
+// the depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy).
 // --min-inliers overrides the tracking-quality threshold.
 //
 // Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
-// truth poses, and reports per pass the mean absolute depth error and hole fraction of raw depth
-// (D_c), the volume (D_v) and G_r (D''') against the reference, over all pixels and over the
-// moving object ("waved_box"). Exit 0, 2 on bad options or input, 1 otherwise.
+// truth poses, and reports the mean absolute depth error and hole fraction of raw depth (D_c),
+// the volume (D_v), the merge passes D' (merge_pass1), D'' (merge_pass2) and G_r (D''', merged)
+// against the reference, over all pixels and over the moving object ("waved_box"), each also
+// over the pixels where raw is valid (the same set for every source), and the error by
+// chessboard distance to the object's silhouette (inside in1, in2, in3, in4_6, in7up; outside
+// out1..out3; printed as a table). Exit 0, 2 on bad options or input, 1 otherwise.
 #include <time.h>
 
 #include <algorithm>
@@ -81,6 +85,16 @@ double Median(std::vector<double> v) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
   return v[v.size() / 2];
+}
+
+// FUSION_EVAL_MERGE_GATE=0 / FUSION_EVAL_MERGE_MAJORITY=0 switch the merge's two deviations from
+// the paper off (recon::MergeOptions::depth_gated_medians / volume_needs_majority).
+void ApplyMergeKnobs(recon::MergeOptions& merge) {
+  if (const char* g = std::getenv("FUSION_EVAL_MERGE_GATE"))
+    merge.depth_gated_medians = std::atoi(g);
+  if (const char* m = std::getenv("FUSION_EVAL_MERGE_MAJORITY")) {
+    merge.volume_needs_majority = std::atoi(m);
+  }
 }
 
 struct Ate {
@@ -351,6 +365,7 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
         if (d > m) d = 0;
   }
   recon::FusionOptions options;
+  ApplyMergeKnobs(options.merge);
   options.threads = threads;
   options.merge_enabled = merge;
   if (volume) options.volume = *volume;
@@ -489,6 +504,39 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   return 0;
 }
 
+// Chessboard distance (pixels) of every pixel of the set {ids == id} (want_inside) or of its
+// complement to the nearest pixel outside that set; 0 for pixels not in the set. Two-pass
+// distance transform.
+void ChessboardDistance(const std::vector<uint32_t>& ids, uint32_t id, bool want_inside, int width,
+                        int height, std::vector<int>& out) {
+  const int big = width + height;
+  out.assign(ids.size(), 0);
+  for (size_t p = 0; p < ids.size(); ++p) out[p] = ((ids[p] == id) == want_inside) ? big : 0;
+  auto at = [&](int x, int y) { return out[static_cast<size_t>(y) * width + x]; };
+  for (int y = 0; y < height; ++y)
+    for (int x = 0; x < width; ++x) {
+      int& d = out[static_cast<size_t>(y) * width + x];
+      if (d == 0) continue;
+      if (x > 0) d = std::min(d, at(x - 1, y) + 1);
+      if (y > 0) {
+        d = std::min(d, at(x, y - 1) + 1);
+        if (x > 0) d = std::min(d, at(x - 1, y - 1) + 1);
+        if (x + 1 < width) d = std::min(d, at(x + 1, y - 1) + 1);
+      }
+    }
+  for (int y = height - 1; y >= 0; --y)
+    for (int x = width - 1; x >= 0; --x) {
+      int& d = out[static_cast<size_t>(y) * width + x];
+      if (d == 0) continue;
+      if (x + 1 < width) d = std::min(d, at(x + 1, y) + 1);
+      if (y + 1 < height) {
+        d = std::min(d, at(x, y + 1) + 1);
+        if (x + 1 < width) d = std::min(d, at(x + 1, y + 1) + 1);
+        if (x > 0) d = std::min(d, at(x - 1, y + 1) + 1);
+      }
+    }
+}
+
 int RunSim(const std::string& scenario_path, std::pair<int, int> range, const std::string& json,
            float volume_size, recon::Vec3f origin, int threads) {
   sim::Scenario scenario = sim::LoadScenario(scenario_path);
@@ -503,14 +551,15 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
   const int last = range.second > 0 ? std::min(range.second, frames_total - 1) : frames_total - 1;
   sim::Simulator simulator(scenario, threads);
   recon::FusionOptions options;
+  ApplyMergeKnobs(options.merge);
   options.threads = threads;
   options.volume.size_m = volume_size;
   options.volume.origin = origin;
   options.volume.truncation_m = std::max(0.03f, 4 * volume_size / options.volume.resolution);
   options.preprocess.depth_max_m = static_cast<float>(scenario.sensor.depth_max_m);
   recon::FusionPipeline pipeline(options);
-  // Sums over frames: absolute error and counts per source (raw, volume, merged), all pixels and
-  // the moving object.
+  // Sums over frames: absolute error and counts per source (raw D_c, volume D_v, the merge passes
+  // D' and D'', and G_r = D'''), all pixels and the moving object.
   struct Acc {
     double err = 0;
     double n = 0;
@@ -518,7 +567,18 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
     double reference = 0;
   };
   std::map<std::string, Acc> acc;
+  // Around the box silhouette: chessboard distance in pixels to the nearest pixel on the other
+  // side of the silhouette, inside the box ("in1" = its outermost ring) and on the background
+  // next to it ("out1"); pixels where the raw depth is valid (the same set for every source).
+  struct Band {
+    const char* name;
+    int lo, hi;  // signed distance range: > 0 inside the box, < 0 outside
+  };
+  const Band bands[] = {{"out3", -3, -3}, {"out2", -2, -2},     {"out1", -1, -1},
+                        {"in1", 1, 1},    {"in2", 2, 2},        {"in3", 3, 3},
+                        {"in4_6", 4, 6},  {"in7up", 7, 1 << 20}};
   std::vector<double> merge_ms;
+  std::vector<int> inside, outside;
   for (int i = first; i <= last; ++i) {
     const sim::SimFrame f = simulator.Render(static_cast<uint64_t>(i));
     recon::Intrinsics k;
@@ -541,15 +601,20 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
     const recon::FrameResult r = pipeline.Process(depth, k, &grey, &pose);
     merge_ms.push_back(r.timings.merge_ms);
     if (i - first < 10) continue;  // let the volume converge first
-    const recon::DepthImage* sources[3] = {&depth, &pipeline.volume_depth(),
+    const std::vector<uint32_t>& ids = f.render.object_ids;
+    ChessboardDistance(ids, box_id, true, k.width, k.height, inside);
+    ChessboardDistance(ids, box_id, false, k.width, k.height, outside);
+    const recon::DepthImage* sources[5] = {&depth, &pipeline.volume_depth(),
+                                           &pipeline.merged().merged, &pipeline.merged().smoothed,
                                            &pipeline.merged().denoised};
-    const char* names[3] = {"raw", "volume", "merged"};
+    const char* names[5] = {"raw", "volume", "merge_pass1", "merge_pass2", "merged"};
     for (size_t p = 0; p < depth.data.size(); ++p) {
       const float ref = f.render.depth_m[p];
       if (!(ref > options.preprocess.depth_min_m && ref < options.preprocess.depth_max_m)) continue;
-      const bool moving = box_id != 0 && f.render.object_ids[p] == box_id;
+      const bool moving = box_id != 0 && ids[p] == box_id;
       const bool raw_valid = depth.data[p] > 0;
-      for (int s = 0; s < 3; ++s) {
+      const int signed_distance = box_id == 0 ? 0 : moving ? inside[p] : -outside[p];
+      for (int s = 0; s < 5; ++s) {
         const float d = sources[s]->data[p];
         // Also over the pixels where the raw depth is valid (like for like with raw).
         if (raw_valid && d > 0) {
@@ -557,6 +622,13 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
             Acc& a = acc[std::string(names[s]) + (region == 0 ? "" : "_moving") + "_where_raw"];
             a.err += std::fabs(d - ref);
             a.n += 1;
+          }
+          for (const Band& b : bands) {
+            if (signed_distance >= b.lo && signed_distance <= b.hi) {
+              Acc& a = acc[std::string(names[s]) + "_box_" + b.name];
+              a.err += std::fabs(d - ref);
+              a.n += 1;
+            }
           }
         }
         for (int region = 0; region < (moving ? 2 : 1); ++region) {
@@ -577,15 +649,29 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
       {"evaluated_frames", static_cast<double>(std::max(0, last - first + 1 - 10))},
       {"ms_merge_median", Median(merge_ms)},
   };
-  for (const char* name :
-       {"raw", "volume", "merged", "raw_moving", "volume_moving", "merged_moving"}) {
-    const Acc& a = acc[name];
-    fields.push_back({std::string(name) + "_mean_abs_error_m", a.n > 0 ? a.err / a.n : 0});
+  for (const char* source : {"raw", "volume", "merge_pass1", "merge_pass2", "merged"}) {
+    for (const char* region : {"", "_moving"}) {
+      const std::string name = std::string(source) + region;
+      const Acc& a = acc[name];
+      fields.push_back({name + "_mean_abs_error_m", a.n > 0 ? a.err / a.n : 0});
+      fields.push_back({name + "_hole_fraction", a.reference > 0 ? a.holes / a.reference : 0});
+      const Acc& c = acc[name + "_where_raw"];
+      fields.push_back({name + "_mean_abs_error_where_raw_valid_m", c.n > 0 ? c.err / c.n : 0});
+    }
+  }
+  // Error against the distance to the box silhouette (raw-valid pixels, same set per source).
+  std::printf("box silhouette band: pixels | mean abs error cm: raw volume D' D'' D'''\n");
+  for (const Band& b : bands) {
+    std::printf("  %-6s %8.0f |", b.name, acc[std::string("raw_box_") + b.name].n);
+    for (const char* source : {"raw", "volume", "merge_pass1", "merge_pass2", "merged"}) {
+      const Acc& a = acc[std::string(source) + "_box_" + b.name];
+      const double e = a.n > 0 ? a.err / a.n : 0;
+      std::printf(" %7.2f", 100 * e);
+      fields.push_back({std::string(source) + "_box_" + b.name + "_mean_abs_error_m", e});
+    }
     fields.push_back(
-        {std::string(name) + "_hole_fraction", a.reference > 0 ? a.holes / a.reference : 0});
-    const Acc& c = acc[std::string(name) + "_where_raw"];
-    fields.push_back(
-        {std::string(name) + "_mean_abs_error_where_raw_valid_m", c.n > 0 ? c.err / c.n : 0});
+        {std::string("box_") + b.name + "_pixels", acc[std::string("raw_box_") + b.name].n});
+    std::printf("\n");
   }
   WriteJson(json, Json(fields));
   return 0;

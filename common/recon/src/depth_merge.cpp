@@ -189,18 +189,27 @@ inline void RunMiddleNetwork([[maybe_unused]] F8* slots, std::index_sequence<I..
    ...);
 }
 
+// Every slot is written by the window loops (Samples = the window's sample count), which GCC
+// cannot see through the runtime window size.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 // Medians over the window `win` (Samples = its sample count, odd) of `depth` at pixels
 // x0..x0+7 of row y, with the joint intensity test |I(p) - I(q)| < lambda_i when `intensity` is
-// not null. Needs x0 - win.half >= 0 and x0 + 7 + win.half < width. The lower median of a lane's
-// n valid samples is moved to the fixed middle slot m = (Samples - 1) / 2 by turning the first
-// m - floor((n - 1) / 2) missing samples into -inf and the rest into +inf (n + that <= Samples
-// for an odd count), so one selection network serves every n and the result is read without a
-// per-lane index.
-template <int Samples>
+// not null, restricted to the samples of the centre's depth cluster when `depth_gate` (see
+// GateSamples). Needs x0 - win.half >= 0 and x0 + 7 + win.half < width. The lower median of a
+// lane's n valid samples is moved to the fixed middle slot m = (Samples - 1) / 2 by turning the
+// first m - floor((n - 1) / 2) missing samples into -inf and the rest into +inf (n + that <=
+// Samples for an odd count), so one selection network serves every n and the result is read without
+// a per-lane index.
+template <int Samples, bool Gate>
 void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lambda_i,
-                 const Window& win, int x0, int y, float* out) {
+                 const DepthImage* depth_gate, float lambda_d, const Window& win, int x0, int y,
+                 float* out) {
   F8 slots[Samples];
   I8 count = {};
+  const F8 centre = LoadF8(&depth.At(x0, y));
+  F8 lowest = centre, highest = centre;  // span of the valid samples and the centre
+  const F8 ld = F8{} + lambda_d;
   const F8 inf = F8{} + 1e30f;
   const F8 zero = {};
   const F8 li = F8{} + lambda_i;
@@ -223,8 +232,61 @@ void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lamb
         diff = diff < 0 ? -diff : diff;
         valid &= __builtin_convertvector(diff, F8) < li;
       }
-      slots[s++] = valid ? d : inf;
+      slots[s] = valid ? d : inf;
+      if constexpr (Gate) {
+        lowest = slots[s] < lowest ? slots[s] : lowest;
+        highest = (valid & (d > highest)) ? d : highest;
+      }
+      ++s;
       count -= valid;
+    }
+  }
+  if constexpr (Gate) {
+    // Only lanes with a measured depth (depth_gate > 0) whose samples span about lambda_d or more
+    // can lose samples to the gate (a narrower span is one cluster; 0.99 keeps rounding out of
+    // it); skip the gate when there are none.
+    const F8 measured = LoadF8(&depth_gate->At(x0, y));
+    const I8 may_split =
+        (measured > zero) & (centre > zero) & (highest - lowest >= F8{} + 0.99f * lambda_d);
+    bool any_split = false;
+    for (int l = 0; l < kLanes; ++l) any_split |= may_split[l] != 0;
+    if (any_split) {
+      // The centre's cluster [lo, hi], grown by every sample closer than lambda_d to it until none
+      // is (as GateSamples; missing samples are +inf and never join).
+      F8 lo = centre, hi = centre;
+      for (int iteration = 0; iteration <= Samples; ++iteration) {
+        // One growth step for every sample at once (Jacobi): the lowest sample above lo - ld and
+        // the highest below hi + ld, over 4 independent accumulators (min / max are exact).
+        const F8 reach_lo = lo - ld, reach_hi = hi + ld, minus_inf = F8{} - 1e30f;
+        F8 new_lo[4] = {lo, lo, lo, lo}, new_hi[4] = {hi, hi, hi, hi};
+        for (int i = 0; i < Samples; ++i) {
+          const F8 v = slots[i];
+          const F8 above = v > reach_lo ? v : inf, below = v < reach_hi ? v : minus_inf;
+          new_lo[i & 3] = above < new_lo[i & 3] ? above : new_lo[i & 3];
+          new_hi[i & 3] = below > new_hi[i & 3] ? below : new_hi[i & 3];
+        }
+        F8 grown_lo = new_lo[0], grown_hi = new_hi[0];
+        for (int a = 1; a < 4; ++a) {
+          grown_lo = new_lo[a] < grown_lo ? new_lo[a] : grown_lo;
+          grown_hi = new_hi[a] > grown_hi ? new_hi[a] : grown_hi;
+        }
+        const I8 changed = (grown_lo != lo) | (grown_hi != hi);
+        lo = grown_lo;
+        hi = grown_hi;
+        bool any = false;
+        for (int l = 0; l < kLanes; ++l) any |= changed[l] != 0;
+        if (!any) break;
+      }
+      I8 in_cluster[Samples];
+      I8 count_cluster = {};
+      for (int i = 0; i < Samples; ++i) {
+        in_cluster[i] = (slots[i] >= lo) & (slots[i] <= hi);
+        count_cluster -= in_cluster[i];
+      }
+      // Lanes with a valid centre whose cluster holds >= 1/4 of the samples drop the rest.
+      const I8 gate = may_split & (4 * count_cluster >= count);
+      for (int i = 0; i < Samples; ++i) slots[i] = (gate & ~in_cluster[i]) ? inf : slots[i];
+      count = gate ? count_cluster : count;
     }
   }
   constexpr int kMiddle = (Samples - 1) / 2;
@@ -242,35 +304,86 @@ void MedianBatch(const DepthImage& depth, const GreyImage* intensity, float lamb
 
 // MedianBatch for the window's sample count (1, 9 or 25: windows are 1x1, 3x3 or 5x5 samples).
 void MedianBatchFor(const DepthImage& depth, const GreyImage* intensity, float lambda_i,
-                    const Window& win, int x0, int y, float* out) {
+                    const DepthImage* depth_gate, float lambda_d, const Window& win, int x0, int y,
+                    float* out) {
   const int per_side = (2 * win.half) / win.stride + 1;
   switch (per_side) {
     case 1:
-      MedianBatch<1>(depth, intensity, lambda_i, win, x0, y, out);
+      if (depth_gate) {
+        MedianBatch<1, true>(depth, intensity, lambda_i, depth_gate, lambda_d, win, x0, y, out);
+      } else {
+        MedianBatch<1, false>(depth, intensity, lambda_i, nullptr, lambda_d, win, x0, y, out);
+      }
       break;
     case 3:
-      MedianBatch<9>(depth, intensity, lambda_i, win, x0, y, out);
+      if (depth_gate) {
+        MedianBatch<9, true>(depth, intensity, lambda_i, depth_gate, lambda_d, win, x0, y, out);
+      } else {
+        MedianBatch<9, false>(depth, intensity, lambda_i, nullptr, lambda_d, win, x0, y, out);
+      }
       break;
     default:
-      MedianBatch<25>(depth, intensity, lambda_i, win, x0, y, out);
+      if (depth_gate) {
+        MedianBatch<25, true>(depth, intensity, lambda_i, depth_gate, lambda_d, win, x0, y, out);
+      } else {
+        MedianBatch<25, false>(depth, intensity, lambda_i, nullptr, lambda_d, win, x0, y, out);
+      }
       break;
   }
 }
 
+// The depth gate of the D'' / D''' medians for one pixel (the scalar form, for border pixels):
+// `samples` holds the n window samples that passed the intensity test, `centre` is D(p). The
+// centre's depth cluster is the interval [lo, hi] grown from the centre by every sample closer
+// than lambda_d to it, i.e. the samples linked to the centre by depth steps < lambda_d (a depth
+// discontinuity is a gap >= lambda_d; noise, however large, leaves no such gap in a dense
+// window). When the centre is valid and its cluster holds at least a quarter of the samples,
+// only those are kept; otherwise all n (an isolated outlier is voted out as in the paper's
+// eq. 4 / 5). Returns the new count.
+int GateSamples(float* samples, int n, float centre, float lambda_d) {
+  if (!(centre > 0)) return n;
+  float lo = centre, hi = centre;
+  for (bool grown = true; grown;) {
+    grown = false;
+    for (int i = 0; i < n; ++i) {
+      const float v = samples[i];
+      if (v > lo - lambda_d && v < hi + lambda_d && (v < lo || v > hi)) {
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+        grown = true;
+      }
+    }
+  }
+  int in_cluster = 0;
+  for (int i = 0; i < n; ++i) in_cluster += samples[i] >= lo && samples[i] <= hi;
+  if (4 * in_cluster < n) return n;
+  int m = 0;
+  for (int i = 0; i < n; ++i) {
+    if (samples[i] >= lo && samples[i] <= hi) samples[m++] = samples[i];
+  }
+  return m;
+}
+
 // D' (eq. 1-3) at pixels x0..x0+7 of row y (same conditions on x0 as MedianBatch; Samples = the
-// window's sample count). The window's medians are only computed when a lane is a hole.
+// window's sample count). The window's medians are only computed when a lane is a hole (its
+// Omega counts also when volume_majority and a lane's D_c agrees with D_v).
 template <int Samples>
 F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
-              float lambda_i, float lambda_d, const Window& win, int x0, int y) {
+              float lambda_i, float lambda_d, bool volume_majority, const Window& win, int x0,
+              int y) {
   const F8 zero = {};
   const F8 ld = F8{} + lambda_d;
   const F8 dc = LoadF8(&raw.At(x0, y)), dv = LoadF8(&volume.At(x0, y));
   const I8 dc_valid = dc > zero, dv_valid = dv > zero;
   const F8 diff = dc - dv;
-  const F8 valid_result = (dv_valid & (diff <= ld) & (-diff <= ld)) ? dv : dc;
-  bool any_hole = false;
-  for (int l = 0; l < 8; ++l) any_hole |= dc_valid[l] == 0;
-  if (!any_hole) return valid_result;
+  const I8 agrees = dv_valid & (diff <= ld) & (-diff <= ld);
+  F8 valid_result = agrees ? dv : dc;
+  bool any_hole = false, any_agrees = false;
+  for (int l = 0; l < 8; ++l) {
+    any_hole |= dc_valid[l] == 0;
+    any_agrees |= (dc_valid & agrees)[l] != 0;
+  }
+  if (!any_hole && !(volume_majority && any_agrees)) return valid_result;
   F8 slots[Samples];
   I8 n_i = {}, n_d = {};
   const F8 inf = F8{} + 1e30f;
@@ -297,6 +410,9 @@ F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& 
       n_i -= in_i;
     }
   }
+  // With volume_majority, D_v replaces a valid D_c only where Omega_D is a majority of Omega_I.
+  if (volume_majority) valid_result = (agrees & (2 * n_d >= n_i)) ? dv : dc;
+  if (!any_hole) return valid_result;
   constexpr int kMiddle = (Samples - 1) / 2;
   I8 low = kMiddle - ((n_i - 1) >> 1);  // as in MedianBatch
   const F8 minus_inf = F8{} - 1e30f;
@@ -309,6 +425,8 @@ F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& 
   const F8 hole_result = n_i == 0 ? zero : ((dv_valid & (2 * n_d >= n_i)) ? dv : slots[kMiddle]);
   return dc_valid ? valid_result : hole_result;
 }
+
+#pragma GCC diagnostic pop
 
 template <class Fn>
 void ForRows(ThreadPool* pool, int height, Fn fn) {
@@ -360,6 +478,7 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
   {
     const Window win = WindowFor(options.merge_k);
     const float li = options.merge_lambda_i;
+    const bool majority = options.volume_needs_majority;
     const int per_side = (2 * win.half) / win.stride + 1;
     ForRows(pool, h, [&](int y) {
       float samples[121];
@@ -368,11 +487,11 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
           // 8 interior pixels at once (bit-identical to the scalar equations below).
           F8 r;
           if (per_side == 5) {
-            r = MergeBatch<25>(raw, volume, intensity, li, ld, win, x, y);
+            r = MergeBatch<25>(raw, volume, intensity, li, ld, majority, win, x, y);
           } else if (per_side == 3) {
-            r = MergeBatch<9>(raw, volume, intensity, li, ld, win, x, y);
+            r = MergeBatch<9>(raw, volume, intensity, li, ld, majority, win, x, y);
           } else {
-            r = MergeBatch<1>(raw, volume, intensity, li, ld, win, x, y);
+            r = MergeBatch<1>(raw, volume, intensity, li, ld, majority, win, x, y);
           }
           std::memcpy(&out.merged.At(x, y), &r, sizeof(r));
           x += kLanes - 1;
@@ -380,8 +499,9 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
         }
         const float dc = raw.At(x, y), dv = volume.At(x, y);
         float result;
-        if (dc > 0) {
-          result = (dv > 0 && std::fabs(dc - dv) <= ld) ? dv : dc;
+        const bool agrees = dv > 0 && std::fabs(dc - dv) <= ld;
+        if (dc > 0 && !(agrees && majority)) {
+          result = agrees ? dv : dc;
         } else {
           const int ip = intensity.At(x, y);
           int n_i = 0, n_d = 0;
@@ -399,7 +519,9 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
               if (vq > 0 && std::fabs(dq - vq) < ld) ++n_d;  // eq. 2
             }
           }
-          if (n_i == 0) {
+          if (dc > 0) {
+            result = 2 * n_d >= n_i ? dv : dc;  // volume_majority: D_v needs the majority
+          } else if (n_i == 0) {
             result = 0;
           } else if (dv > 0 && 2 * n_d >= n_i) {
             result = dv;
@@ -411,17 +533,20 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
       }
     });
   }
-  // D'' (eq. 4): joint bilateral median over Omega_I on D', subsampled to 5 x 5 (<= 25 samples).
+  // D'' (eq. 4): joint bilateral median over Omega_I on D', subsampled to 5 x 5 (<= 25 samples);
+  // with depth_gated_medians only over the depth-consistent part of Omega_I (GateSamples).
   {
     const Window win = WindowFor(options.smooth_k);
     const float li = options.smooth_lambda_i;
+    const DepthImage* gate = options.depth_gated_medians ? &raw : nullptr;
     ForRows(pool, h, [&](int y) {
       LaneMedian median(32);
       int counts[kLanes];
+      float samples[25];
       for (int x0 = 0; x0 < w; x0 += kLanes) {
         const int lanes = std::min(kLanes, w - x0);
         if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
-          MedianBatchFor(out.merged, &intensity, li, win, x0, y, &out.smoothed.At(x0, y));
+          MedianBatchFor(out.merged, &intensity, li, gate, ld, win, x0, y, &out.smoothed.At(x0, y));
           continue;
         }
         for (int lane = 0; lane < kLanes; ++lane) {
@@ -438,9 +563,11 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
                 const int xx = x + dx;
                 if (xx < 0 || xx >= w) continue;
                 const float d = drow[xx];
-                if (d > 0 && std::abs(ip - irow[xx]) < li) median.Set(lane, n++, d);
+                if (d > 0 && std::abs(ip - irow[xx]) < li) samples[n++] = d;
               }
             }
+            if (gate && raw.At(x, y) > 0) n = GateSamples(samples, n, out.merged.At(x, y), ld);
+            for (int i = 0; i < n; ++i) median.Set(lane, i, samples[i]);
           }
           counts[lane] = n;
           if (n == 0) median.Set(lane, n++, 0.0f);
@@ -453,18 +580,21 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
       }
     });
   }
-  // D''' (eq. 5): median over the valid pixels of a small window, no intensity test.
+  // D''' (eq. 5): median over the valid pixels of a small window, no intensity test (depth-gated
+  // like D'').
   {
     const Window win = WindowFor(options.denoise_k);
     const int per_side = (2 * win.half) / win.stride + 1;
     const int slots = per_side * per_side <= 9 ? 16 : 32;
+    const DepthImage* gate = options.depth_gated_medians ? &raw : nullptr;
     ForRows(pool, h, [&](int y) {
       LaneMedian median(slots);
       int counts[kLanes];
+      float samples[25];
       for (int x0 = 0; x0 < w; x0 += kLanes) {
         const int lanes = std::min(kLanes, w - x0);
         if (x0 - win.half >= 0 && x0 + kLanes - 1 + win.half < w) {
-          MedianBatchFor(out.smoothed, nullptr, 0, win, x0, y, &out.denoised.At(x0, y));
+          MedianBatchFor(out.smoothed, nullptr, 0, gate, ld, win, x0, y, &out.denoised.At(x0, y));
           continue;
         }
         for (int lane = 0; lane < kLanes; ++lane) {
@@ -478,9 +608,11 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
               for (int dx = -win.half; dx <= win.half; dx += win.stride) {
                 const int xx = x + dx;
                 if (xx < 0 || xx >= w) continue;
-                if (drow[xx] > 0) median.Set(lane, n++, drow[xx]);
+                if (drow[xx] > 0) samples[n++] = drow[xx];
               }
             }
+            if (gate && raw.At(x, y) > 0) n = GateSamples(samples, n, out.smoothed.At(x, y), ld);
+            for (int i = 0; i < n; ++i) median.Set(lane, i, samples[i]);
           }
           counts[lane] = n;
           if (n == 0) median.Set(lane, n++, 0.0f);

@@ -22,6 +22,17 @@ struct MergeOptions {
   int smooth_k = 8;           // D'' window (paper: k = 8, subsampled to 5 x 5)
   float smooth_lambda_i = 7;  // D'' intensity threshold (paper: 7)
   int denoise_k = 2;          // D''' window (paper: k = 2 -> 3 x 3, no intensity test)
+  // Deviation from the paper (off = eq. 4 / 5 exactly): the D'' and D''' medians also gate by
+  // depth (the centre's depth cluster, see MergeDepth), as a bilateral filter's range kernel
+  // does, so that where the intensity cannot tell an object from its background (similar grey)
+  // the median does not mix their depths.
+  bool depth_gated_medians = true;
+  // Optional deviation from the paper (off by default = eq. 3 exactly): D_v replaces a valid D_c
+  // (|D_c - D_v| <= lambda_D) only where the support region agrees with the volume too
+  // (|Omega_D| >= |Omega_I| / 2, the test eq. 3 applies to holes), so that a volume lagging an
+  // object that moves less than lambda_D per frame replaces less of its measured depth. Costs a
+  // D' window on every pixel (docs/recon.md: +2.5-3 ms CPU for a small gain).
+  bool volume_needs_majority = false;
 
   // Throws ReconError for k < 1 or a negative threshold.
   void Validate() const;
@@ -38,13 +49,22 @@ struct MergedDepth {
 // registered to the depth. Throws ReconError if the sizes differ or an input is empty.
 // Per pixel p of D' (eq. 3):
 //   D_c(p) valid, D_v(p) valid, |D_c - D_v| >  lambda_D -> D_c(p)
-//   D_c(p) valid, D_v(p) valid, |D_c - D_v| <= lambda_D -> D_v(p)
+//   D_c(p) valid, D_v(p) valid, |D_c - D_v| <= lambda_D -> D_v(p) (with volume_needs_majority
+//     only if |Omega_D| >= |Omega_I| / 2, else D_c(p))
 //   D_c(p) valid, D_v(p) missing                        -> D_c(p)
 //   D_c(p) missing, |Omega_D| >= |Omega_I| / 2 > 0 and D_v(p) valid -> D_v(p)
 //   D_c(p) missing otherwise -> median{D_c(q) : q in Omega_I(p)} (0 if Omega_I is empty)
 // with Omega_k(p) the valid D_c pixels of the window, Omega_I (eq. 1) those with
 // |I(p) - I(q)| < lambda_I and Omega_D (eq. 2) those of Omega_I with a valid D_v and
 // |D_c(q) - D_v(q)| < lambda_D.
+// D''(p) (eq. 4) = median{D'(q) : q in Omega_I(p)} (window smooth_k, lambda_I smooth_lambda_i, on
+// every pixel, 0 if empty); D'''(p) (eq. 5) = median of the valid D''(q) in the denoise_k window.
+// With depth_gated_medians, where D_c(p) is valid and the centre value c = D'(p) (D''(p) for
+// D''') is valid, the median takes only the samples of c's depth cluster -- those linked to c by
+// steps < lambda_D between sample depths (the smallest interval [lo, hi] containing c with no
+// sample in (lo - lambda_D, lo) or (hi, hi + lambda_D)) -- if they are at least a quarter of the
+// samples; otherwise (D_c holes, isolated outliers) all samples as above. A quarter: a pixel at
+// an object's convex 90-degree corner sees about a quarter of its window on the object.
 void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
                 const MergeOptions& options, MergedDepth& out, ThreadPool* pool);
 
