@@ -421,9 +421,9 @@ TEST_F(EndToEnd, FaceOrbitThroughTheWholeGraphInLockStep) {
   auto& rec = run.recording;
   // The face is found in every frame of the first 0.4 s of the orbit.
   EXPECT_GE(rec["/face/light"].size(), static_cast<size_t>(kFrames - 1));
-  // Against the light at the face: tests/face/face_synthetic_light_test.cpp measures a median of
-  // 16.2 deg on this scenario (bound 20).
-  EXPECT_LT(MedianErrorDeg(rec["/face/light"], rec["/groundtruth/face_light"], "face_light"), 20.0);
+  // Against the light at the face: 4.6 deg median measured here with the shipped (landmark-
+  // aligned) model on the human-proportioned procedural head; bound: issue #6's 8.5 deg target.
+  EXPECT_LT(MedianErrorDeg(rec["/face/light"], rec["/groundtruth/face_light"], "face_light"), 8.5);
   CheckGoldens(run, "face_orbit", {2, 9});
 }
 
@@ -447,9 +447,9 @@ TEST_F(EndToEnd, CourtyardSunThroughTheWholeGraphInLockStep) {
   auto& rec = run.recording;
   EXPECT_EQ(rec["/scene/light"].size(), static_cast<size_t>(kFrames));
   // docs/light.md: with sensor effects (normals from the raw depth) every estimator variant is at
-  // 16-30 deg median on the courtyards (measured here 13.9 deg with the committed estimator, 22.7
-  // deg with the albedo groups and analytic transfer); bound 30 deg. (The 5 deg target holds only
-  // without sensor noise; from fusion's G_r the median is worse still today: docs/replay.md.)
+  // 17-26 deg median on the courtyards (measured here 22.9 deg); bound 30 deg. Issue #8's 5 deg
+  // target holds only without sensor noise (2.2-4.5 deg); from fusion's G_r the median is 21-41
+  // deg today (docs/benchmarks/scene_light.md): the quantised depth's normals dominate.
   EXPECT_LT(MedianErrorDeg(rec["/scene/light"], rec["/groundtruth/light"], "scene_light"), 30.0);
   CheckGoldens(run, "courtyard_sun", {3, 10});
 }
