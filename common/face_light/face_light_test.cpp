@@ -563,6 +563,9 @@ TEST(EstimatorTest, InvalidSamplesMatchThePlainSolveWithAndWithoutTheMaskCache) 
   EstimatorOptions uncached_options = options;
   uncached_options.mask_cache = 0;
   const FaceLightEstimator cached(model, options);
+  EstimatorOptions exact_options = options;
+  exact_options.exact_masked_solve = true;
+  const FaceLightEstimator exact_solver(model, exact_options);
   const FaceLightEstimator uncached(model, uncached_options);
   std::mt19937_64 rng(5);
   const std::vector<double> lights[3] = {TestLight(30, 10), TestLight(-50, -15), TestLight(70, 30)};
@@ -650,14 +653,21 @@ TEST(EstimatorTest, InvalidSamplesMatchThePlainSolveWithAndWithoutTheMaskCache) 
     }
     const LightEstimate plain = FaceLightEstimator(sub, options).EstimateRgb(sub_rgb);
     const LightEstimate masked = cached.EstimateRgb(rgb, mask);
+    const LightEstimate exact = exact_solver.EstimateRgb(rgb, mask);
     ASSERT_EQ(masked.samples_used, used);
-    // Equal to the double solve up to the float rounding of the output (2^-24 relative).
+    ASSERT_EQ(exact.samples_used, used);
+    // exact_masked_solve: equal to the double solve up to the float rounding of the output
+    // (2^-24 relative). Default (the full-set float pseudo-inverse and the mask's 9 x 9
+    // correction): float precision, like the all-valid path.
     double worst_reference = 0;
     for (int n = 0; n < 9; ++n) {
       for (int c = 0; c < 3; ++c) {
-        const double error = std::abs(masked.coefficients[n][c] - reference[c][n]);
-        EXPECT_LE(error, 0x1.0p-24 * std::abs(reference[c][n]) + 1e-12) << "n=" << n << " c=" << c;
-        worst_reference = std::max(worst_reference, error / std::abs(reference[c][n]));
+        const double ref = reference[c][n];
+        const double error = std::abs(exact.coefficients[n][c] - ref);
+        EXPECT_LE(error, 0x1.0p-24 * std::abs(ref) + 1e-12) << "n=" << n << " c=" << c;
+        const double float_error = std::abs(masked.coefficients[n][c] - ref) / (1 + std::abs(ref));
+        EXPECT_LT(float_error, 1e-5) << "n=" << n << " c=" << c;
+        worst_reference = std::max(worst_reference, float_error);
       }
     }
     // The all-valid model of the valid samples (float pseudo-inverse): float precision.
@@ -673,24 +683,34 @@ TEST(EstimatorTest, InvalidSamplesMatchThePlainSolveWithAndWithoutTheMaskCache) 
         plain.dominant_direction[0], plain.dominant_direction[1], plain.dominant_direction[2]};
     EXPECT_LT(AngleDeg(masked.dominant_direction, plain_direction), 1e-2);
     EXPECT_NEAR(masked.intensity, plain.intensity, 1e-5 * (1 + plain.intensity));
-    // The residual (closed form from coefficient space) matches the per-sample residuals.
-    double ss_res = 0;
-    for (int i = 0; i < used; ++i) {
-      double predicted = 0, mean = 0;
-      for (int c = 0; c < 3; ++c) mean += sub_rgb[3 * i + c] / 3.0;
-      for (int n = 0; n < 9; ++n) {
-        double light = 0;
-        for (int c = 0; c < 3; ++c) light += masked.coefficients[n][c] / 3.0;
-        predicted += sub.rtf[i][n] * light;
+    // The residual (closed form from coefficient space) matches the per-sample residuals of the
+    // returned light: to 1e-3 with the exact solve; with the float pseudo-inverse the closed form
+    // inherits its first-order error (like the all-valid path, printed): here the noise is small
+    // (rms 0.0017 on values ~0.5), the bound 1e-2.
+    const auto per_sample_rms = [&](const LightEstimate& estimate) {
+      double ss_res = 0;
+      for (int i = 0; i < used; ++i) {
+        double predicted = 0, mean = 0;
+        for (int c = 0; c < 3; ++c) mean += sub_rgb[3 * i + c] / 3.0;
+        for (int n = 0; n < 9; ++n) {
+          double light = 0;
+          for (int c = 0; c < 3; ++c) light += estimate.coefficients[n][c] / 3.0;
+          predicted += sub.rtf[i][n] * light;
+        }
+        ss_res += (mean - predicted) * (mean - predicted);
       }
-      ss_res += (mean - predicted) * (mean - predicted);
-    }
-    EXPECT_NEAR(masked.rms_residual, std::sqrt(ss_res / used), 1e-3 * masked.rms_residual);
+      return std::sqrt(ss_res / used);
+    };
+    EXPECT_NEAR(exact.rms_residual, per_sample_rms(exact), 1e-3 * exact.rms_residual);
+    EXPECT_NEAR(masked.rms_residual, per_sample_rms(masked), 1e-2 * masked.rms_residual);
+    const double rms_error = std::abs(masked.rms_residual / per_sample_rms(masked) - 1);
+    const double plain_rms_error = std::abs(plain.rms_residual / per_sample_rms(plain) - 1);
     std::printf(
-        "%d %% invalid: vs the double solve %.3g, vs the valid-samples model %.3g (relative), "
-        "direction %.3g deg\n",
+        "%d %% invalid: vs the double solve %.3g, vs the valid-samples model %.3g (relative to "
+        "1 + |value|), direction %.3g deg; rms residual relative error %.3g (all-valid path "
+        "%.3g)\n",
         invalid_percent, worst_reference, worst,
-        AngleDeg(masked.dominant_direction, plain_direction));
+        AngleDeg(masked.dominant_direction, plain_direction), rms_error, plain_rms_error);
   }
 }
 

@@ -108,6 +108,10 @@ int Run(int argc, char** argv) {
   cases.push_back({"rgb_directional", directional, true, 0});
   cases.push_back({"rgb_directional_10pct_invalid", directional, true, 10});
   cases.push_back({"rgb_directional_10pct_invalid_changing", directional, true, 10, true});
+  // The exact (double right-hand side) solve with invalid samples instead of the pseudo-inverse.
+  fl::EstimatorOptions directional_exact = directional;
+  directional_exact.exact_masked_solve = true;
+  cases.push_back({"rgb_directional_10pct_invalid_exact", directional_exact, true, 10});
   fl::EstimatorOptions directional_robust = directional;
   directional_robust.directional_robust = 3;
   cases.push_back({"rgb_directional_robust", directional_robust, true, 0});

@@ -3,6 +3,7 @@
 #include "probeless/face_light/estimator.h"
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -144,6 +145,9 @@ void CholeskySolve9Multi(const std::array<double, 81>& l, double (*b)[kRtfCoeffi
 constexpr int kMaxDirN = 25;       // 5 bands
 constexpr size_t kMaxGrid = 1024;  // EstimatorOptions::directional_grid
 constexpr int kMaxMaskCache = 64;  // EstimatorOptions::mask_cache
+// Largest infinity norm of the mask correction N_valid^-1 N_full for the pseudo-inverse path
+// (EstimatorOptions::exact_masked_solve): it bounds how much the float error grows.
+constexpr double kMaxCorrectionNorm = 1e9;
 constexpr int kMaskWords = kMaxSamples / 64;
 
 // Symmetric m (N x N, row-major) += sign * sum_j (w t) t^T over the listed samples j (rows
@@ -197,27 +201,25 @@ void RankUpdate(double* m, int n, const double* wt, const double* t, const int* 
   }
 }
 
-// Y_k^T M Y_k and (M Y_k)_0 of every grid direction k for a symmetric n x n M (lower triangle
-// used), from the transposed basis values [a * count + k]; vectorised over k. Cloned for AVX2
-// (same operations and order, no FMA: the same values).
-PROBELESS_AVX2_CLONES void GridTables(const double* m, int n, const double* basis_t, size_t count,
-                                      double* syy, double* s0y) {
-  std::fill(syy, syy + count, 0.0);
-  std::fill(s0y, s0y + count, 0.0);
-  double inner[kMaxGrid];
-  for (int a = 0; a < n; ++a) {
-    const double* ya = basis_t + a * count;
-    const double maa = m[a * n + a];
-    for (size_t k = 0; k < count; ++k) inner[k] = maa * ya[k];
-    for (int b = 0; b < a; ++b) {
-      const double mab2 = 2 * m[a * n + b];
-      const double* yb = basis_t + b * count;
-      for (size_t k = 0; k < count; ++k) inner[k] += mab2 * yb[k];
-    }
-    const double m0a = m[a];
+// Y_k^T M Y_k and (M Y_k)_0 of every grid direction k for M = M_full - sum_j w_j t_j t_j^T (the
+// full-set matrix downdated by the listed samples j): syy_full[k] - sum_j w_j (t_j.Y_k)^2 and
+// s0y_full[k] - sum_j w_j t_j0 (t_j.Y_k), from the precomputed projections
+// proj[i * count + k] = t_i.Y_k (wt0[i] = w_i t_i0); vectorised over k. Cloned for AVX2 (same
+// operations and order, no FMA: the same values).
+PROBELESS_AVX2_CLONES void GridDowndate(const double* syy_full, const double* s0y_full,
+                                        const double* proj, size_t count, const float* weights,
+                                        const double* wt0, int wt0_stride, const int* index,
+                                        int listed, double* syy, double* s0y) {
+  std::copy(syy_full, syy_full + count, syy);
+  std::copy(s0y_full, s0y_full + count, s0y);
+  for (int j = 0; j < listed; ++j) {
+    const size_t i = static_cast<size_t>(index[j]);
+    const double* p = proj + i * count;
+    const double w = weights[i];
+    const double w0 = wt0[i * wt0_stride];
     for (size_t k = 0; k < count; ++k) {
-      syy[k] += ya[k] * inner[k];
-      s0y[k] += m0a * ya[k];
+      syy[k] -= w * (p[k] * p[k]);
+      s0y[k] -= w0 * p[k];
     }
   }
 }
@@ -226,7 +228,11 @@ PROBELESS_AVX2_CLONES void GridTables(const double* m, int n, const double* basi
 struct MaskData {
   std::array<double, 81> factor{};  // Cholesky factor of the downdated T^T W T + R
   bool factor_ok = false;
-  bool dir_ready = false;  // the directional fit's data below is filled
+  // EstimatorOptions::exact_masked_solve off and the correction well conditioned: e = C pinv v.
+  bool corrected = false;
+  std::array<double, 81> normal;      // the downdated T^T W T + R itself (if corrected)
+  std::array<double, 81> correction;  // C = normal^-1 (T^T W T + R)_full, row-major
+  bool dir_ready = false;             // the directional fit's data below is filled
   double dir_m[kMaxDirN * kMaxDirN];
   double syy[kMaxGrid], s0y[kMaxGrid];
 };
@@ -553,54 +559,62 @@ sh::Vec3 FitDirection(const DirectionalProblem& problem, const sh::Vec3& init,
 }  // namespace
 
 // Least-recently-used entries, each the key (validity bits) and its MaskData; stamp 0 = empty.
+// A hit is read in place (no copy): Acquire counts the reader, Release uncounts it, and Store
+// only overwrites an entry without readers (so a reader's entry never changes under it).
 struct FaceLightEstimator::MaskCache {
   struct Entry {
     uint64_t key[kMaskWords] = {};
     uint64_t stamp = 0;
+    std::atomic<int> readers{0};
     MaskData data;
   };
   std::mutex mutex;
-  std::vector<Entry> entries;
+  std::unique_ptr<Entry[]> entries;
+  int size = 0;
   uint64_t clock = 0;
   int dir_n = 0;
   size_t grid = 0;
 
-  // Copies the entry of key into data; false if absent or the cache is busy.
-  bool Lookup(const uint64_t* key, MaskData& data) {
+  // The entry of key, counted as read until Release; null if absent or the cache is busy.
+  Entry* Acquire(const uint64_t* key) {
     std::unique_lock lock(mutex, std::try_to_lock);
-    if (!lock.owns_lock()) return false;
-    for (Entry& entry : entries) {
+    if (!lock.owns_lock()) return nullptr;
+    for (int k = 0; k < size; ++k) {
+      Entry& entry = entries[k];
       if (entry.stamp == 0 || std::memcmp(entry.key, key, sizeof entry.key) != 0) continue;
       entry.stamp = ++clock;
-      data.factor = entry.data.factor;
-      data.factor_ok = entry.data.factor_ok;
-      data.dir_ready = entry.data.dir_ready;
-      if (data.dir_ready) {
-        std::copy(entry.data.dir_m, entry.data.dir_m + dir_n * dir_n, data.dir_m);
-        std::copy(entry.data.syy, entry.data.syy + grid, data.syy);
-        std::copy(entry.data.s0y, entry.data.s0y + grid, data.s0y);
-      }
-      return true;
+      entry.readers.fetch_add(1);
+      return &entry;
     }
-    return false;
+    return nullptr;
   }
-  // Stores data under key in the least recently used entry (skipped if the cache is busy).
+  static void Release(Entry* entry) {
+    if (entry) entry->readers.fetch_sub(1);
+  }
+  // Stores data under key in the least recently used entry without readers (skipped if the cache
+  // is busy or every entry is being read).
   void Store(const uint64_t* key, const MaskData& data) {
     std::unique_lock lock(mutex, std::try_to_lock);
     if (!lock.owns_lock()) return;
-    Entry* oldest = &entries.front();
-    for (Entry& entry : entries) {
-      if (entry.stamp < oldest->stamp) oldest = &entry;
+    Entry* oldest = nullptr;
+    for (int k = 0; k < size; ++k) {
+      Entry& entry = entries[k];
+      if (entry.readers.load() == 0 && (!oldest || entry.stamp < oldest->stamp)) oldest = &entry;
     }
+    if (!oldest) return;
     std::memcpy(oldest->key, key, sizeof oldest->key);
     oldest->stamp = ++clock;
-    oldest->data.factor = data.factor;
-    oldest->data.factor_ok = data.factor_ok;
-    oldest->data.dir_ready = data.dir_ready;
+    MaskData& out = oldest->data;
+    out.factor = data.factor;
+    out.factor_ok = data.factor_ok;
+    out.corrected = data.corrected;
+    out.normal = data.normal;
+    out.correction = data.correction;
+    out.dir_ready = data.dir_ready;
     if (data.dir_ready) {
-      std::copy(data.dir_m, data.dir_m + dir_n * dir_n, oldest->data.dir_m);
-      std::copy(data.syy, data.syy + grid, oldest->data.syy);
-      std::copy(data.s0y, data.s0y + grid, oldest->data.s0y);
+      std::copy(data.dir_m, data.dir_m + dir_n * dir_n, out.dir_m);
+      std::copy(data.syy, data.syy + grid, out.syy);
+      std::copy(data.s0y, data.s0y + grid, out.s0y);
     }
   }
 };
@@ -768,10 +782,22 @@ FaceLightEstimator::FaceLightEstimator(const FaceLightModel& model, EstimatorOpt
       dir_rtf_d_[k] = dir_rtf_[k];
       dir_wrtf_d_[k] = double(weights_[k / dir_n_]) * double(dir_rtf_[k]);
     }
+    const size_t grid = dir_grid_.size();
+    dir_grid_proj_.assign(static_cast<size_t>(n_samples) * grid, 0.0);
+    for (int i = 0; i < n_samples; ++i) {
+      const double* t = &dir_rtf_d_[static_cast<size_t>(i) * dir_n_];
+      for (size_t k = 0; k < grid; ++k) {
+        const double* y = &dir_grid_basis_[k * dir_n_];
+        double sum = 0;
+        for (int a = 0; a < dir_n_; ++a) sum += t[a] * y[a];
+        dir_grid_proj_[i * grid + k] = sum;
+      }
+    }
   }
   if (options.mask_cache > 0) {
     cache_ = std::make_unique<MaskCache>();
-    cache_->entries.resize(options.mask_cache);
+    cache_->entries = std::make_unique<MaskCache::Entry[]>(options.mask_cache);
+    cache_->size = options.mask_cache;
     cache_->dir_n = dir_n_;
     cache_->grid = dir_grid_.size();
   }
@@ -867,6 +893,7 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
 
   double e[3][kN] = {};
   std::array<double, 81> factor{};
+  std::array<double, 81> factored{};  // the matrix build_factor factored
   double rhs[3][kN] = {};
   const auto collect_inactive = [&]() {  // after the active set changed (robust)
     inactive = 0;
@@ -891,6 +918,7 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
       factor = prior_;
       RankUpdate(factor.data(), kN, wrtf_d_.data(), rtf_d_.data(), active_index, count, 1);
     }
+    factored = factor;
     return internal::Cholesky<9>(factor);
   };
   // rhs = T^T W v over the active samples: dot products (double accumulation) of the transposed
@@ -919,37 +947,92 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
 
   const bool plain = !options_.robust && !options_.non_negative;
   const bool fast = all_valid && plain;
-  MaskData mask_data;  // plain solve with invalid samples: per-mask data (cached)
+  // Plain solve with invalid samples: per-mask data, a cache entry read in place (released on
+  // return) or computed here (and stored).
+  MaskData computed;
+  const MaskData* mask = &computed;
+  MaskCache::Entry* hit = nullptr;
+  struct ReleaseOnReturn {
+    MaskCache::Entry*& entry;
+    ~ReleaseOnReturn() { MaskCache::Release(entry); }
+  } release{hit};
   if (fast) {
     // E = pinv v: precomputed pseudo-inverse of the full valid set (eq. 19).
     for (int c = 0; c < channels; ++c) Dot8Rows(pinv_.data(), kN, v[c], stride, e[c]);
   } else if (plain) {
     // Everything that depends on the validity mask only: from the cache, or computed (and
     // stored). The values are bit-identical either way.
-    if (!(cache_ && cache_->Lookup(key, mask_data))) {
-      mask_data.factor_ok = build_factor();
-      mask_data.factor = factor;
-      mask_data.dir_ready = false;
-      if (mask_data.factor_ok && options_.directional_fit && !dir_rtf_.empty()) {
-        const int dn = dir_n_;
-        std::copy(dir_normal_.begin(), dir_normal_.end(), mask_data.dir_m);
-        RankUpdate(mask_data.dir_m, dn, dir_wrtf_d_.data(), dir_rtf_d_.data(), inactive_index,
-                   inactive, -1);
-        GridTables(mask_data.dir_m, dn, dir_grid_basis_t_.data(), dir_grid_.size(), mask_data.syy,
-                   mask_data.s0y);
-        mask_data.dir_ready = true;
+    hit = cache_ ? cache_->Acquire(key) : nullptr;
+    if (hit) {
+      mask = &hit->data;
+    } else {
+      computed.factor_ok = build_factor();
+      computed.factor = factor;
+      computed.corrected = false;
+      if (computed.factor_ok && !options_.exact_masked_solve) {
+        // C = N_valid^-1 N_full, column by column: e_valid = N_valid^-1 T^T W v_zeroed
+        // = C (N_full^-1 T^T W v_zeroed) = C pinv v_zeroed. Its error is the float error of
+        // pinv v times |C|: used while |C|_inf <= kMaxCorrectionNorm.
+        for (int k = 0; k < kN; k += 3) {  // three columns at a time
+          double columns[3][kN];
+          for (int q = 0; q < 3; ++q) {
+            for (int a = 0; a < kN; ++a) columns[q][a] = normal_[a * kN + k + q];
+          }
+          CholeskySolve9Multi(factor, columns, 3);
+          for (int q = 0; q < 3; ++q) {
+            for (int a = 0; a < kN; ++a) computed.correction[a * kN + k + q] = columns[q][a];
+          }
+        }
+        double norm = 0;
+        for (int a = 0; a < kN; ++a) {
+          double row = 0;
+          for (int k = 0; k < kN; ++k) row += std::abs(computed.correction[a * kN + k]);
+          norm = std::max(norm, row);
+        }
+        computed.corrected = norm <= kMaxCorrectionNorm;
+        computed.normal = factored;
       }
-      if (cache_) cache_->Store(key, mask_data);
+      computed.dir_ready = false;
+      if (computed.factor_ok && options_.directional_fit && !dir_rtf_.empty()) {
+        const int dn = dir_n_;
+        std::copy(dir_normal_.begin(), dir_normal_.end(), computed.dir_m);
+        RankUpdate(computed.dir_m, dn, dir_wrtf_d_.data(), dir_rtf_d_.data(), inactive_index,
+                   inactive, -1);
+        GridDowndate(dir_grid_syy_.data(), dir_grid_s0y_.data(), dir_grid_proj_.data(),
+                     dir_grid_.size(), weights_.data(), dir_wrtf_d_.data(), dn, inactive_index,
+                     inactive, computed.syy, computed.s0y);
+        computed.dir_ready = true;
+      }
+      if (cache_) cache_->Store(key, computed);
     }
-    if (!mask_data.factor_ok) return out;
-    factor = mask_data.factor;
-    build_rhs(false);
-    solve();
+    if (!mask->factor_ok) return out;
+    factor = mask->factor;
+    if (mask->corrected) {
+      for (int c = 0; c < channels; ++c) {
+        double full[kN];  // invalid values zeroed above
+        Dot8Rows(pinv_.data(), kN, v[c], stride, full);
+        for (int a = 0; a < kN; ++a) {
+          const double* row = &mask->correction[a * kN];
+          double sum = 0;
+          for (int k = 0; k < kN; ++k) sum += row[k] * full[k];
+          e[c][a] = sum;
+        }
+      }
+    } else {
+      build_rhs(false);
+      solve();
+    }
   } else {
     if (!build()) return out;
     solve();
   }
 
+  const MaskData& mask_data = *mask;
+  // The light came from a float pseudo-inverse (not from rhs): this is its normal matrix
+  // (T^T W T + R over the active samples), else null.
+  const double* pinv_normal = fast                  ? normal_.data()
+                              : mask_data.corrected ? mask_data.normal.data()
+                                                    : nullptr;
   // Residuals (channel mean) of every sample under the current light: the residual is linear, so
   // it is the channel-mean intensity minus the RTF applied to the channel-mean light.
   alignas(32) float residual[kMaxSamples + 8];
@@ -1033,14 +1116,14 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     const double* cost_matrix = m;
     double b[kMaxDirN] = {};
     if (dir_rtf_.empty()) {
-      if (fast) {
-        std::copy(normal_.begin(), normal_.end(), m);
+      if (pinv_normal) {
+        std::copy(pinv_normal, pinv_normal + kN * kN, m);
         for (int a = 0; a < kN; ++a) {
           double sum = 0;
           for (int k = 0; k < kN; ++k) {
             double mean_e = 0;
             for (int c = 0; c < channels; ++c) mean_e += e[c][k];
-            sum += normal_[a * kN + k] * mean_e / channels;
+            sum += pinv_normal[a * kN + k] * mean_e / channels;
           }
           b[a] = sum;
         }
@@ -1110,8 +1193,13 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
       for (int i = 0; i < n_samples; ++i) {
         if (!active[i]) continue;
         const float* t = t_all + static_cast<size_t>(i) * dn;
-        double predicted = 0;
-        for (int a = 0; a < dn; ++a) predicted += t[a] * light[a];
+        double partial[4] = {};  // independent chains (a single sum is latency bound)
+        int a = 0;
+        for (; a + 4 <= dn; a += 4) {
+          for (int l = 0; l < 4; ++l) partial[l] += t[a + l] * light[a + l];
+        }
+        double predicted = (partial[0] + partial[1]) + (partial[2] + partial[3]);
+        for (; a < dn; ++a) predicted += t[a] * light[a];
         dres[i] = static_cast<float>(mean_value[i] - predicted);
         magnitude[count++] = std::abs(dres[i]);
       }
@@ -1158,7 +1246,7 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     for (int i = 0; i < stride; i += 4) {
       for (int l = 0; l < 4; ++l) {
         const double x =
-            fast ? double(mean_value[i + l])
+            pinv_normal ? double(mean_value[i + l])
             : channels == 3
                 ? (double(v[0][i + l]) + double(v[1][i + l]) + double(v[2][i + l])) * inv_channels
                 : double(v[0][i + l]);
@@ -1171,8 +1259,8 @@ LightEstimate FaceLightEstimator::Estimate(const float* values, int channels,
     double quadratic = 0;
     for (int a = 0; a < kN; ++a) {
       double r = 0, re = 0;
-      if (fast) {
-        for (int k = 0; k < kN; ++k) r += normal_[a * kN + k] * mean_light[k];
+      if (pinv_normal) {
+        for (int k = 0; k < kN; ++k) r += pinv_normal[a * kN + k] * mean_light[k];
       } else {
         for (int c = 0; c < channels; ++c) r += rhs[c][a] / channels;
       }

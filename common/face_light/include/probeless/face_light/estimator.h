@@ -60,10 +60,18 @@ struct EstimatorOptions {
   // Tikhonov weight (relative to the mean diagonal) added to the direction RTFs' normal matrix.
   double direction_ridge = 1e-3;
   // With invalid samples (and neither robust nor non_negative): least-recently-used cache of this
-  // many validity masks (0..64, 0 = off) holding the downdated 9 x 9 Cholesky factor and, for the
-  // directional fit, its downdated cost matrix and the start grid's quadratic terms. A steady face
-  // changes its mask rarely; a hit skips the downdates. Results are bit-identical with and without.
+  // many validity masks (0..64, 0 = off) holding the downdated 9 x 9 Cholesky factor (and the
+  // correction of exact_masked_solve) and, for the directional fit, its downdated cost matrix and
+  // the start grid's quadratic terms. A steady face changes its mask rarely; a hit skips the
+  // downdates. Results are bit-identical with and without.
   int mask_cache = 4;
+  // Plain solve with invalid samples: false (default) = the full-set float pseudo-inverse applied
+  // to the intensities with the invalid ones zeroed, then the 9 x 9 correction
+  // (T^T W T + R)_valid^-1 (T^T W T + R)_full (per mask, cached): the float precision of the
+  // all-valid path (~1e-6 relative). Masks whose correction has an infinity norm above 4 (large
+  // regions missing) and true here use the exact right-hand side T^T W v accumulated in double
+  // (equal to the double least-squares solve to the float rounding of the output; ~1 us more).
+  bool exact_masked_solve = false;
 };
 
 // One estimated light in the light frame (model.h). Units: albedo-normalised image intensity per
@@ -152,6 +160,9 @@ class FaceLightEstimator {
   std::vector<double> dir_grid_basis_t_;  // [a * grid size + k]
   std::vector<double> dir_grid_syy_;
   std::vector<double> dir_grid_s0y_;
+  // Direction RTFs projected on the grid's basis, [i * grid size + k] = t_i.Y_k (downdates the
+  // tables above per mask).
+  std::vector<double> dir_grid_proj_;
   bool uniform_weights_ = true;  // every weight is 1 (weight_floor = 0)
   // Double copies for the downdates: [i * 9 + n] = t_in and w_i t_in; [i * dir_n_ + a] the same
   // for the RTFs of the directional fit.
