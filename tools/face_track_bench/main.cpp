@@ -5,11 +5,15 @@
 // frame of the face tracker on frames of the face_orbit scenario (rendered once): a full-image
 // detection (first frame / lost face), a region re-detection, and the steady state (landmark
 // tracking + head pose + sampling the default model's positions), medians over N frames, one core.
+// Both: --backend dlib|yunet|haar (detector, default dlib), --yunet-model PATH (default
+// $PROBELESS_DATA or <source>/../shared/data, models/yunet_120x160.onnx), --haar-cascade PATH
+// (default opencv-data's frontal cascade).
 // Prints a table, or one JSON object with --json. Exit 2 on bad options.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -48,12 +52,12 @@ double Median(std::vector<double> v) {
 // error above 0.3 counts as wrong (a false positive). Rendered frames are cached in `cache` (PPM
 // + landmark text) when given.
 int Coverage(bool json, const std::string& cache, int redetect_period, bool flow_tracking,
-             bool clahe) {
+             bool clahe, const ft::TrackerOptions& base, const std::string& backend) {
   sim::Scenario scenario =
       sim::LoadScenario(std::string(PROBELESS_SOURCE_TREE) + "/data/scenarios/face_orbit.yaml");
   const int count = scenario.frames;
   std::unique_ptr<sim::Simulator> simulator;
-  ft::TrackerOptions options;
+  ft::TrackerOptions options = base;
   options.redetect_period = redetect_period;
   options.flow_tracking = flow_tracking;
   options.clahe_clip_limit = clahe ? options.clahe_clip_limit : 0;
@@ -144,13 +148,16 @@ int Coverage(bool json, const std::string& cache, int redetect_period, bool flow
     std::printf(
         "{\"scenario\":\"face_orbit\",\"frames\":%d,\"frames_with_face_truth\":%d,"
         "\"found\":%d,\"detected\":%d,\"flow_tracked\":%d,\"wrong\":%d,"
-        "\"mean_error_iod\":%.4f,\"mean_confidence\":%.3f,\"redetect_period\":%d}\n",
+        "\"mean_error_iod\":%.4f,\"mean_confidence\":%.3f,\"redetect_period\":%d,"
+        "\"backend\":\"%s\"}\n",
         count, truth_frames, found, detected, flow, wrong,
         good > 0 ? error_sum / std::max(found, 1) : 0.0, found ? quality_sum / found : 0.0,
-        redetect_period);
+        redetect_period, backend.c_str());
   } else {
-    std::printf("face_track_bench --coverage: face_orbit, %d frames (%d with the face in view)\n",
-                count, truth_frames);
+    std::printf(
+        "face_track_bench --coverage: face_orbit, %d frames (%d with the face in view), "
+        "backend %s\n",
+        count, truth_frames, backend.c_str());
     std::printf(
         "  face reported in %d frames (%d detections, %d flow-tracked), %d wrong (> 0.3 "
         "iod), mean error %.3f iod, mean confidence %.2f\n",
@@ -168,7 +175,12 @@ int main(int argc, char** argv) {
   int frames = 200;
   bool json = false, coverage = false, flow_tracking = true, clahe = true;
   int redetect_period = 10;
-  std::string cache;
+  std::string cache, backend = "dlib";
+  ft::TrackerOptions base;
+  const char* data = std::getenv("PROBELESS_DATA");
+  base.yunet_model_path =
+      (data && *data ? std::string(data) : std::string(PROBELESS_SOURCE_TREE) + "/../shared/data") +
+      "/models/yunet_120x160.onnx";
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--json")) {
       json = true;
@@ -182,20 +194,34 @@ int main(int argc, char** argv) {
       cache = argv[++i];
     } else if (!std::strcmp(argv[i], "--redetect-period") && i + 1 < argc) {
       redetect_period = std::max(1, std::atoi(argv[++i]));
+    } else if (!std::strcmp(argv[i], "--backend") && i + 1 < argc) {
+      backend = argv[++i];
+      if (backend != "dlib" && backend != "yunet" && backend != "haar") {
+        std::fprintf(stderr,
+                     "[error] [face_track_bench] unknown --backend '%s' (dlib, yunet or haar)\n",
+                     backend.c_str());
+        return 2;
+      }
+      base.backend = ft::BackendFromName(backend);
+    } else if (!std::strcmp(argv[i], "--yunet-model") && i + 1 < argc) {
+      base.yunet_model_path = argv[++i];
+    } else if (!std::strcmp(argv[i], "--haar-cascade") && i + 1 < argc) {
+      base.haar_cascade_path = argv[++i];
     } else if (!std::strcmp(argv[i], "--frames") && i + 1 < argc) {
       frames = std::max(10, std::atoi(argv[++i]));
     } else {
       std::fprintf(stderr,
                    "[error] [face_track_bench] usage: face_track_bench [--frames N] [--no-flow] "
-                   "[--no-clahe] [--json]\n"
+                   "[--no-clahe] [--backend dlib|yunet|haar] [--yunet-model PATH] "
+                   "[--haar-cascade PATH] [--json]\n"
                    "       face_track_bench --coverage [--cache DIR] [--redetect-period N] "
-                   "[--no-flow] [--no-clahe] [--json]\n");
+                   "[--no-flow] [--no-clahe] [--backend ...] [--json]\n");
       return 2;
     }
   }
   if (coverage) {
     try {
-      return Coverage(json, cache, redetect_period, flow_tracking, clahe);
+      return Coverage(json, cache, redetect_period, flow_tracking, clahe, base, backend);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "[error] [face_track_bench] %s\n", e.what());
       return 1;
@@ -210,7 +236,7 @@ int main(int argc, char** argv) {
     const auto model = face_light::LoadModel(std::string(PROBELESS_SOURCE_TREE) +
                                              "/data/face_light/default_model.txt");
     ft::FaceSampler sampler(model);
-    ft::TrackerOptions options;
+    ft::TrackerOptions options = base;
     options.redetect_period = 1 << 30;  // steady state: tracking only
     options.flow_tracking = flow_tracking;
     options.clahe_clip_limit = clahe ? options.clahe_clip_limit : 0;
@@ -241,7 +267,7 @@ int main(int argc, char** argv) {
       sample_only.push_back(Ms(t1, t2));
       steady.push_back(Ms(t0, t2));
     }
-    ft::TrackerOptions every;
+    ft::TrackerOptions every = base;
     every.redetect_period = 1;  // a region detection every frame
     ft::FaceTracker redetecting(every);
     redetecting.Track(view(0), k);
@@ -255,17 +281,18 @@ int main(int argc, char** argv) {
         (Median(steady) * (period - 1) + Median(region) + Median(sample_only)) / period;
     if (json) {
       std::printf(
-          "{\"image\":\"640x480 rgb8 face_orbit render\",\"samples\":%d,\"frames\":%d,"
-          "\"flow_tracking\":%s,\"clahe\":%s,"
+          "{\"image\":\"640x480 rgb8 face_orbit render\",\"backend\":\"%s\",\"samples\":%d,"
+          "\"frames\":%d,\"flow_tracking\":%s,\"clahe\":%s,"
           "\"full_detection_ms\":%.2f,\"region_detection_ms\":%.2f,"
           "\"steady_track_ms\":%.2f,\"steady_sample_ms\":%.3f,\"steady_total_ms\":%.2f,"
           "\"amortised_redetect10_ms\":%.2f}\n",
-          sampler.SampleCount(), frames, flow_tracking ? "true" : "false", clahe ? "true" : "false",
-          Median(full), Median(region), Median(track_only), Median(sample_only), Median(steady),
-          amortised);
+          backend.c_str(), sampler.SampleCount(), frames, flow_tracking ? "true" : "false",
+          clahe ? "true" : "false", Median(full), Median(region), Median(track_only),
+          Median(sample_only), Median(steady), amortised);
     } else {
-      std::printf("face_track_bench: 640x480 rgb8, %d samples, medians over %d frames\n",
-                  sampler.SampleCount(), frames);
+      std::printf(
+          "face_track_bench: 640x480 rgb8, backend %s, %d samples, medians over %d frames\n",
+          backend.c_str(), sampler.SampleCount(), frames);
       std::printf(
           "  full detection     %7.2f ms\n  region detection   %7.2f ms\n"
           "  steady: track      %7.2f ms\n  steady: sample     %7.3f ms\n"

@@ -97,6 +97,7 @@ struct FaceTracker::Impl {
   cv::Mat work;  // padded / scaled detection input
   cv::Mat bgr;   // YuNet input
   bool tracking = false;
+  std::optional<Box> detection;  // this frame's successful detection (backend box)
   std::array<Point2f, kLandmarkCount> previous{};
   int64_t last_detection = 0;
   int64_t frames = 0, full = 0, region = 0;
@@ -352,6 +353,7 @@ struct FaceTracker::Impl {
   }
 
   std::array<Point2f, kLandmarkCount> FromDetection(const Box& box) {
+    detection = box;
     const auto first = landmarks.Landmarks(View(gray), box);
     return landmarks.Landmarks(View(gray), LandmarkBox(first));
   }
@@ -430,6 +432,10 @@ struct FaceTracker::Impl {
     t.landmarks = lms;
     const Box b = LandmarkBox(lms);
     t.box = {float(b.x), float(b.y), float(b.width), float(b.height)};
+    if (detected && detection) {
+      t.detection_box = {float(detection->x), float(detection->y), float(detection->width),
+                         float(detection->height)};
+    }
     const Intrinsics in = k.fx > 0 ? k : Intrinsics::Guess(gray.cols, gray.rows);
     HeadPose measured = EstimateHeadPose(lms, in.fx, in.fy, in.cx, in.cy,
                                          filtered ? raw_pose : HeadPose{}, &t.pose_rms_px);
@@ -460,6 +466,7 @@ void FaceTracker::Reset() {
 FaceTrack FaceTracker::Track(const ImageView& image, const Intrinsics& intrinsics) {
   Impl& s = *impl_;
   s.ToGray(image);
+  s.detection.reset();
   ++s.frames;
   bool detected = false, flow_only = false, flowed = false;
   double confidence = 1;
@@ -565,6 +572,7 @@ FaceTrack FaceTracker::Track(const ImageView& image, const Intrinsics& intrinsic
 FaceTrack FaceTracker::DetectOnce(const ImageView& image, const Intrinsics& intrinsics) {
   Impl& s = *impl_;
   s.ToGray(image);
+  s.detection.reset();
   s.EqualizeAll();
   const auto box = s.DetectFull();
   if (!box) return {};

@@ -115,8 +115,11 @@ struct FaceTrack {
   float confidence = 1;
   std::array<Point2f, kLandmarkCount> landmarks{};  // iBUG 300-W order, image pixels
   std::array<float, 4> box{};  // detector-style face box x, y, width, height (pixels)
-  HeadPose pose;               // face frame -> camera frame (filtered)
-  double pose_rms_px = 0;      // RMS reprojection error of the generic model (pixels)
+  // The backend's own box (x, y, width, height, pixels; its convention: dlib HOG, YuNet or Haar)
+  // when this frame ran a successful detection (detected), else zeros.
+  std::array<float, 4> detection_box{};
+  HeadPose pose;           // face frame -> camera frame (filtered)
+  double pose_rms_px = 0;  // RMS reprojection error of the generic model (pixels)
 };
 
 // Detection + landmarks + head pose over a stream of frames. Not thread-safe; deterministic.
