@@ -83,6 +83,14 @@ TEST(Errors, MismatchedSizesAndOptions) {
   FusionOptions bad;
   bad.threads = 0;
   EXPECT_EQ(ErrorOf([&] { FusionPipeline p(bad); }), "fusion: threads must be >= 1");
+  FusionOptions bad_block;
+  bad_block.volume_normal_block = 0;
+  EXPECT_EQ(ErrorOf([&] { FusionPipeline p(bad_block); }),
+            "fusion: volume_normal_block must be 1..4");
+  FusionOptions bad_step;
+  bad_step.volume_normal_step_voxels = 0;
+  EXPECT_EQ(ErrorOf([&] { FusionPipeline p(bad_step); }),
+            "fusion: volume_normal_step_voxels must be in (0, 4]");
   msgs::CameraInfo info;
   info.width = 640;
   info.height = 480;

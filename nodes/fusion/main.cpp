@@ -10,8 +10,10 @@
 // first camera's frame), truncation (0.03 m), max_weight (64), threads (2), depth_min (0.3),
 // depth_max (4.0), merge (true), merge_k (20), lambda_i (7), lambda_d (0.05 m), smooth_k (8),
 // smooth_lambda_i (7), denoise_k (2), icp_iterations ([4, 5, 10], fine to coarse), mesh_out (""
-// or a .ply path written at shutdown), world_frame ("world"). Reset: publish any
-// probeless_msgs/Header on ~/reset (/fusion/reset).
+// or a .ply path written at shutdown), world_frame ("world"), normals (G_r's normals: "depth" =
+// from D''', "volume" = the TSDF gradient where D''' agrees with the volume; see
+// recon::FusionOptions::normal_source), normal_gap (0.03 m), normal_gradient_step (1 voxel). Reset:
+// publish any probeless_msgs/Header on ~/reset (/fusion/reset).
 //
 // A frame is processed when its depth and its image (same header.stamp_ns) have both arrived, or
 // on the depth alone when no image with that stamp comes before the next depth. Exit: 0 on
@@ -71,6 +73,19 @@ int Run(int argc, char** argv) {
   for (int64_t n : node.Param("icp_iterations", std::vector<int64_t>{4, 5, 10})) {
     options.icp.iterations.push_back(static_cast<int>(n));
   }
+  {
+    const bool volume_default = options.normal_source == recon::NormalSource::kVolume;
+    const std::string normals = node.Param("normals", volume_default ? "volume" : "depth");
+    if (normals != "depth" && normals != "volume") {
+      throw node::NodeError("fusion: param normals must be depth or volume, got '" + normals + "'");
+    }
+    options.normal_source =
+        normals == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
+  }
+  options.volume_normal_max_gap_m =
+      static_cast<float>(node.Param("normal_gap", double{options.volume_normal_max_gap_m}));
+  options.volume_normal_step_voxels = static_cast<float>(
+      node.Param("normal_gradient_step", double{options.volume_normal_step_voxels}));
   const std::string mesh_out = node.Param("mesh_out", "");
   const std::string world_frame = node.Param("world_frame", "world");
   recon::FusionPipeline pipeline(options);

@@ -383,6 +383,13 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   if (const char* mw = std::getenv("FUSION_EVAL_MAXW")) options.volume.max_weight = std::atoi(mw);
   if (const char* tr = std::getenv("FUSION_EVAL_TRUNC"))
     options.volume.truncation_m = std::atof(tr);
+  if (const char* ns = std::getenv("FUSION_EVAL_NORMALS")) {  // depth | volume (G_r normals)
+    options.normal_source =
+        std::string(ns) == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
+  }
+  if (const char* nb = std::getenv("FUSION_EVAL_NORMAL_BLOCK")) {
+    options.volume_normal_block = std::atoi(nb);
+  }
   recon::FusionPipeline pipeline(options);
   const recon::VolumeOptions& vol = pipeline.options().volume;
   std::fprintf(stderr,

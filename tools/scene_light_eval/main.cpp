@@ -31,8 +31,11 @@
 // fusion node does (6 m volume, 256^3, ICP tracking; --fused-known-pose: the simulator's pose)
 // and scores the variants on its G_r (merged depth + normals, the image's colour) -> `fused`;
 // --fused-volume uses G_v (the TSDF raycast) instead, --fused-normal-step S recomputes the
-// normals from G_r's depth. --mix scores hybrids of clean and sensor inputs (which sensor effect
-// costs what; printed). Estimator switches: --normal-filter (light::FilterNormals; --filter-radius,
+// normals from G_r's depth; fusion config: --fused-size M, --fused-origin X,Y,Z,
+// --fused-resolution N, --fused-truncation M (defaults: the demo's), --fused-normals depth|volume
+// (FusionOptions::normal_source), --fused-normal-gap M, --fused-gradient-step V. --mix scores
+// hybrids of clean and sensor inputs (which sensor effect costs what; printed). Estimator switches:
+// --normal-filter (light::FilterNormals; --filter-radius,
 // --filter-angle, --filter-view, --filter-jump), --temporal N / --forgetting F
 // (light::TemporalLightEstimator fed with the N - 1 frames before each evaluated one, camera
 // rotation from the simulator), --smooth-radius / --normal-step (normals of the sensor depth),
@@ -97,9 +100,21 @@ struct Options {
   int normal_step = -1;    // --normal-step S: NormalsFromDepth step (-1: GeometryFromSimFrame's)
   bool fused_volume = false;  // --fused-volume: G_v (the TSDF raycast, depth and normals) not G_r
   int fused_normal_step = 0;  // --fused-normal-step S: normals from G_r's depth (0: fusion's)
-  int temporal = 1;           // --temporal N: TemporalLightEstimator over N consecutive frames
-  float forgetting = 0.5f;    // --forgetting F
-  bool no_balance = false;    // --no-balance: no normal-orientation balancing (ablation)
+  // Fusion configuration (defaults: launch/demo_scene.yaml's fusion node): --fused-size M,
+  // --fused-origin X,Y,Z (metres, first camera's frame), --fused-resolution N, --fused-truncation
+  // M,
+  // --fused-normals depth|volume (FusionOptions::normal_source), --fused-normal-gap M,
+  // --fused-gradient-step V.
+  float fused_size = 6.0f;
+  float fused_origin[3] = {-3.0f, -3.0f, 0.3f};
+  int fused_resolution = 256;
+  float fused_truncation = 0.08f;
+  bool fused_volume_normals = false;
+  float fused_normal_gap = 0.03f;
+  float fused_gradient_step = 1.0f;
+  int temporal = 1;         // --temporal N: TemporalLightEstimator over N consecutive frames
+  float forgetting = 0.5f;  // --forgetting F
+  bool no_balance = false;  // --no-balance: no normal-orientation balancing (ablation)
   bool mix = false;  // --mix: hybrids of clean and sensor inputs (which sensor effect costs what)
 };
 
@@ -462,7 +477,29 @@ int Run(int argc, char** argv) {
       o.no_balance = true;
     else if (a == "--mix")
       o.mix = true;
-    else if (a == "--fused-step")
+    else if (a == "--fused-size")
+      o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-resolution")
+      o.fused_resolution = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-truncation")
+      o.fused_truncation = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-normal-gap")
+      o.fused_normal_gap = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-gradient-step")
+      o.fused_gradient_step = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--fused-origin") {
+      const std::string v = value();
+      if (std::sscanf(v.c_str(), "%f,%f,%f", &o.fused_origin[0], &o.fused_origin[1],
+                      &o.fused_origin[2]) != 3) {
+        throw node::UsageError("--fused-origin needs X,Y,Z, got '" + v + "'");
+      }
+    } else if (a == "--fused-normals") {
+      const std::string v = value();
+      if (v != "depth" && v != "volume") {
+        throw node::UsageError("--fused-normals must be depth or volume, got '" + v + "'");
+      }
+      o.fused_volume_normals = v == "volume";
+    } else if (a == "--fused-step")
       o.fused_step = static_cast<int>(node::ParseNumberOption(a, value()));
     else
       throw node::UsageError("unknown option '" + a + "'");
@@ -505,9 +542,14 @@ int Run(int argc, char** argv) {
     recon::Pose first_pose_inverse;
     if (o.fused) {
       recon::FusionOptions fo;
-      fo.volume.size_m = 6.0f;
-      fo.volume.origin = {-3.0f, -3.0f, 0.3f};
-      fo.volume.truncation_m = 0.08f;
+      fo.volume.size_m = o.fused_size;
+      fo.volume.origin = {o.fused_origin[0], o.fused_origin[1], o.fused_origin[2]};
+      fo.volume.resolution = o.fused_resolution;
+      fo.volume.truncation_m = o.fused_truncation;
+      fo.normal_source =
+          o.fused_volume_normals ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
+      fo.volume_normal_max_gap_m = o.fused_normal_gap;
+      fo.volume_normal_step_voxels = o.fused_gradient_step;
       fo.preprocess.depth_max_m = 6.0f;
       fo.threads = o.threads;
       fusion.emplace(fo);
@@ -544,6 +586,10 @@ int Run(int argc, char** argv) {
       if (f.index == 0) first_pose_inverse = c2w.Inverse();
       const recon::Pose known = first_pose_inverse * c2w;
       last_fusion = fusion->Process(depth, k, &grey, o.fused_known_pose ? &known : nullptr);
+      if (last_fusion.state == recon::TrackingState::kLost && !last_fusion.icp.failure.empty()) {
+        std::fprintf(stderr, "fusion lost at frame %llu: %s\n",
+                     static_cast<unsigned long long>(f.index), last_fusion.icp.failure.c_str());
+      }
     };
     auto sensor_geometry_of = [&](const sim::SimFrame& frame) {
       light::GeometryStorage g = light::GeometryFromSimFrame(frame, true);
@@ -867,8 +913,12 @@ int Run(int argc, char** argv) {
   }
   if (o.fused) {
     out << ",\n  \"fused\": {\"known_pose\": " << (o.fused_known_pose ? "true" : "false")
-        << ", \"step\": " << o.fused_step << ", \"full\": " << SeriesJson(full.fused)
-        << ", \"fast\": " << SeriesJson(fast.fused) << "}";
+        << ", \"step\": " << o.fused_step << ", \"volume_size_m\": " << Num(o.fused_size)
+        << ", \"volume_resolution\": " << o.fused_resolution
+        << ", \"truncation_m\": " << Num(o.fused_truncation) << ", \"normals\": \""
+        << (o.fused_volume_normals ? "volume" : "depth")
+        << "\", \"full\": " << SeriesJson(full.fused) << ", \"fast\": " << SeriesJson(fast.fused)
+        << "}";
   }
   out << ",\n  \"seconds\": " << Num(seconds) << "\n}\n";
   if (!o.plots.empty()) WritePlots(o.plots, full.clean, fast.clean);

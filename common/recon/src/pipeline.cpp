@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 
 namespace probeless::recon {
@@ -22,6 +23,15 @@ void FusionOptions::Validate() const {
   volume.Validate();
   merge.Validate();
   if (threads < 1) throw ReconError("fusion: threads must be >= 1");
+  if (!(volume_normal_max_gap_m >= 0)) {
+    throw ReconError("fusion: volume_normal_max_gap_m must be >= 0");
+  }
+  if (volume_normal_block < 1 || volume_normal_block > 4) {
+    throw ReconError("fusion: volume_normal_block must be 1..4");
+  }
+  if (!(volume_normal_step_voxels > 0 && volume_normal_step_voxels <= 4)) {
+    throw ReconError("fusion: volume_normal_step_voxels must be in (0, 4]");
+  }
   if (track_level < 0 || track_level > 2) throw ReconError("fusion: track_level must be 0..2");
   if (preprocess.levels < 1 || preprocess.levels > 4) {
     throw ReconError("fusion: preprocess.levels must be 1..4");
@@ -167,12 +177,102 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
     MergeDepth(frame_.raw_depth, volume_depth_, *grey, options_.merge, merged_, pool);
     ComputeVertexMap(merged_.denoised, intrinsics, merged_vertices_, pool);
     ComputeNormalMap(merged_vertices_, merged_normals_, pool);
+    if (options_.normal_source == NormalSource::kVolume && integrate) {
+      VolumeNormals();
+    }
     r.timings.merge_ms = MsSince(t);
     r.timings.merge_cpu_ms = CpuMs() - c;
   }
   r.timings.total_ms = r.timings.preprocess_ms + r.timings.icp_ms + r.timings.integrate_ms +
                        r.timings.raycast_ms + r.timings.merge_ms;
   return r;
+}
+
+void FusionPipeline::VolumeNormals() {
+  const DepthImage& d = merged_.denoised;
+  const float gap = options_.volume_normal_max_gap_m;
+  const float step = options_.volume_normal_step_voxels;
+  const int block = options_.volume_normal_block;
+  const Pose& c2w = pose_;
+  const double* r = c2w.r;
+  // D''' is on the volume's surface at (x, y) (not a moving object, hole fill or unseen part).
+  auto agrees = [&](int x, int y) {
+    const float z = d.At(x, y), zv = volume_depth_.At(x, y);
+    return z > 0 && zv > 0 && std::fabs(z - zv) <= gap;
+  };
+  // The camera-frame normal of the volume at pixel (x, y)'s D''' point; false where D''' and D_v
+  // disagree or the volume has no gradient there.
+  auto normal_at = [&](int x, int y, Vec3f* out) {
+    if (!agrees(x, y)) return false;
+    const Vec3f p = merged_vertices_.At(x, y);
+    Vec3f nw;
+    if (!volume_->NormalAt(c2w.Apply(p), step, &nw)) return false;
+    // R^T n: world -> camera.
+    Vec3f n{static_cast<float>(r[0] * nw.x + r[3] * nw.y + r[6] * nw.z),
+            static_cast<float>(r[1] * nw.x + r[4] * nw.y + r[7] * nw.z),
+            static_cast<float>(r[2] * nw.x + r[5] * nw.y + r[8] * nw.z)};
+    if (Dot(n, p) > 0) n = -1.0f * n;  // towards the camera
+    *out = n;
+    return true;
+  };
+  constexpr int kTasks = 16;
+  if (block == 1) {
+    ParallelFor(pool_.get(), kTasks, [&](int task) {
+      for (int y = d.height * task / kTasks; y < d.height * (task + 1) / kTasks; ++y) {
+        for (int x = 0; x < d.width; ++x) {
+          Vec3f n;
+          if (normal_at(x, y, &n)) merged_normals_.At(x, y) = n;
+        }
+      }
+    });
+    return;
+  }
+  // Anchors every `block` pixels in x and y (zero = none); every other agreeing pixel takes the
+  // bilinear interpolation of its (up to) four surrounding anchors that lie on its surface (D'''
+  // within the gap), renormalised, and is evaluated itself when none does.
+  const int aw = (d.width - 1) / block + 2, ah = (d.height - 1) / block + 2;
+  anchor_normals_.Resize(aw, ah);
+  ParallelFor(pool_.get(), kTasks, [&](int task) {
+    for (int ay = ah * task / kTasks; ay < ah * (task + 1) / kTasks; ++ay) {
+      for (int ax = 0; ax < aw; ++ax) {
+        const int x = ax * block, y = ay * block;
+        Vec3f n{};
+        if (x < d.width && y < d.height && !normal_at(x, y, &n)) n = {};
+        anchor_normals_.At(ax, ay) = n;
+      }
+    }
+  });
+  const float inv_block = 1.0f / block;
+  ParallelFor(pool_.get(), kTasks, [&](int task) {
+    for (int y = d.height * task / kTasks; y < d.height * (task + 1) / kTasks; ++y) {
+      const int ay = y / block;
+      const float fy = (y - ay * block) * inv_block;
+      for (int x = 0; x < d.width; ++x) {
+        if (!agrees(x, y)) continue;
+        const int ax = x / block;
+        const float fx = (x - ax * block) * inv_block;
+        const float z = d.At(x, y);
+        Vec3f sum{};
+        float weight = 0;
+        for (int c = 0; c < 4; ++c) {
+          const int cx = ax + (c & 1), cy = ay + (c >> 1);
+          const float w = ((c & 1) ? fx : 1 - fx) * ((c >> 1) ? fy : 1 - fy);
+          if (w <= 0) continue;
+          const Vec3f n = anchor_normals_.At(cx, cy);
+          if (n.x == 0 && n.y == 0 && n.z == 0) continue;
+          if (std::fabs(d.At(cx * block, cy * block) - z) > gap) continue;
+          sum = sum + w * n;
+          weight += w;
+        }
+        Vec3f n;
+        if (weight > 0 && Norm(sum) > 1e-6f) {
+          merged_normals_.At(x, y) = Normalized(sum);
+        } else if (normal_at(x, y, &n)) {
+          merged_normals_.At(x, y) = n;
+        }
+      }
+    }
+  });
 }
 
 }  // namespace probeless::recon

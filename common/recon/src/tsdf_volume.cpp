@@ -283,6 +283,28 @@ float TsdfVolume::TsdfAt(Vec3f p) const {
   return v;
 }
 
+bool TsdfVolume::NormalAt(Vec3f p, float step_voxels, Vec3f* normal) const {
+  const Sampler s{tsdf_.data(), res_, bricks_};
+  const Vec3f o = options_.origin;
+  const float gx = (p.x - o.x) * inv_voxel_ - 0.5f, gy = (p.y - o.y) * inv_voxel_ - 0.5f,
+              gz = (p.z - o.z) * inv_voxel_ - 0.5f;
+  const float h = step_voxels;
+  float v[6];
+  if (!s.Trilinear(gx + h, gy, gz, &v[0], nullptr) ||
+      !s.Trilinear(gx - h, gy, gz, &v[1], nullptr) ||
+      !s.Trilinear(gx, gy + h, gz, &v[2], nullptr) ||
+      !s.Trilinear(gx, gy - h, gz, &v[3], nullptr) ||
+      !s.Trilinear(gx, gy, gz + h, &v[4], nullptr) ||
+      !s.Trilinear(gx, gy, gz - h, &v[5], nullptr)) {
+    return false;
+  }
+  const Vec3f g{v[0] - v[1], v[2] - v[3], v[4] - v[5]};
+  const float len = Norm(g);
+  if (!(len > 1e-6f)) return false;
+  *normal = (1.0f / len) * g;
+  return true;
+}
+
 void TsdfVolume::March(Vec3f origin, Vec3f dir, float t_min, float t_max, float* t_hit,
                        Vec3f* normal) const {
   *t_hit = 0;

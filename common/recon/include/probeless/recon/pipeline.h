@@ -19,6 +19,12 @@
 
 namespace probeless::recon {
 
+// Where G_r's normals come from (see FusionOptions::normal_source).
+enum class NormalSource {
+  kDepth,   // central differences of D''' (its vertex map), the paper's G_r
+  kVolume,  // the TSDF gradient at D''''s points where D''' agrees with D_v, kDepth elsewhere
+};
+
 struct FusionOptions {
   VolumeOptions volume;  // in the world frame, see initial_pose
   PreprocessOptions preprocess;
@@ -31,6 +37,18 @@ struct FusionOptions {
   // full-resolution raw depth.
   int track_level = 1;
   int threads = 2;  // worker threads in all (>= 1)
+  // G_r's normals. kVolume: at each pixel whose D''' is within volume_normal_max_gap_m (metres)
+  // of D_v, the normal of the TSDF gradient (central differences at +-volume_normal_step_voxels
+  // voxels, TsdfVolume::NormalAt) at D''''s back-projected point, rotated into the camera frame;
+  // elsewhere (moving objects, unobserved or lost) the normals of D'''. The volume averages many
+  // frames, so its gradient is far less affected by depth quantisation than D''''s differences.
+  NormalSource normal_source = NormalSource::kDepth;
+  float volume_normal_max_gap_m = 0.03f;
+  float volume_normal_step_voxels = 1.0f;
+  // The volume normal is evaluated every volume_normal_block pixels in x and y (anchors) and
+  // interpolated bilinearly between the anchors on the same surface (D''' within
+  // volume_normal_max_gap_m) in between; 1 = every pixel (about 3x the cost of 2).
+  int volume_normal_block = 2;
   // Pose of the first frame (and after Reset), camera -> world. The default volume (origin
   // (-1, -1.2, 0.5), 2 m) then spans x in [-1, 1], y in [-1.2, 0.8] and z in [0.5, 2.5] m of the
   // first camera.
@@ -103,7 +121,8 @@ class FusionPipeline {
   const DepthImage& volume_depth() const { return volume_depth_; }
   // D', D'', D''' of the last frame (D''' = depth of G_r).
   const MergedDepth& merged() const { return merged_; }
-  // Normals of G_r (from D''', camera frame, towards the camera; (0, 0, 0) = none).
+  // Normals of G_r (camera frame, towards the camera; (0, 0, 0) = none): from D''' or the volume,
+  // see FusionOptions::normal_source.
   const Vec3Image& merged_normals() const { return merged_normals_; }
   // The last frame's preprocessed pyramid (raw_depth = D_c).
   const FramePyramid& frame() const { return frame_; }
@@ -111,6 +130,9 @@ class FusionPipeline {
   const FusionOptions& options() const { return options_; }
 
  private:
+  // Replaces merged_normals_ by the volume's where D''' agrees with D_v (NormalSource::kVolume).
+  void VolumeNormals();
+
   FusionOptions options_;
   std::unique_ptr<ThreadPool> pool_;
   std::unique_ptr<TsdfVolume> volume_;
@@ -123,6 +145,7 @@ class FusionPipeline {
   MergedDepth merged_;
   Vec3Image merged_vertices_;
   Vec3Image merged_normals_;
+  Vec3Image anchor_normals_;  // VolumeNormals scratch
   DepthImage depth_scratch_;
   GreyImage no_intensity_;
 };

@@ -109,6 +109,12 @@ class TsdfVolume {
   // Trilinear TSDF value (in units of the truncation distance, [-1, 1]) at a world point; NaN
   // outside the volume or where any of the 8 voxels is unobserved.
   float TsdfAt(Vec3f world) const;
+  // Surface normal at a world point from the TSDF gradient: central differences of the trilinear
+  // TSDF at +-`step_voxels` voxels along each world axis (KinectFusion, Newcombe et al. 2011
+  // §3.5's raycast normal, here at an arbitrary point), normalised; world frame, pointing out of
+  // the surface (towards free space). False (and `normal` untouched) outside the volume, where a
+  // sample is unobserved or the gradient vanishes.
+  bool NormalAt(Vec3f world, float step_voxels, Vec3f* normal) const;
   // Whether the brick holding voxel (i, j, k) has been observed.
   bool BrickObserved(int i, int j, int k) const;
   int ObservedBricks() const;
