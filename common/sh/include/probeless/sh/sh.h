@@ -21,6 +21,7 @@
 #pragma once
 
 #include <array>
+#include <cassert>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -64,53 +65,6 @@ constexpr int DegreeOf(int n) {
 
 using Vec3 = std::array<double, 3>;
 
-// Writes Y_0..Y_{bands^2-1} at the unit direction (x, y, z) to out[0..bands^2). The direction is
-// not normalised here (non-unit input gives the homogeneous polynomials, scaled). bands must be
-// 1..5 (not checked: this is the hot path; use Basis() for a checked call).
-template <typename T>
-inline void EvaluateBasis(int bands, T x, T y, T z, T* out) {
-  // Recurrence in z on Q_l^m = P_l^m(z) / sin^m(theta) (Condon-Shortley phase in Q_m^m), with
-  // sin^m(theta) cos(m phi) = Re((x + i y)^m) and sin^m(theta) sin(m phi) = Im((x + i y)^m).
-  constexpr double kInvFourPi = 1.0 / (4.0 * std::numbers::pi);
-  T c = 1, s = 0;  // Re and Im of (x + i y)^m
-  T q_mm = 1;      // Q_m^m = (-1)^m (2m-1)!!
-  for (int m = 0; m < bands; ++m) {
-    if (m > 0) {
-      const T c_next = c * x - s * y;
-      s = c * y + s * x;
-      c = c_next;
-      q_mm *= -static_cast<T>(2 * m - 1);
-    }
-    T q_prev2 = 0, q_prev = 0;
-    double ratio = 1;  // (l-m)!/(l+m)!
-    for (int l = m; l < bands; ++l) {
-      T q;
-      if (l == m) {
-        q = q_mm;
-        ratio = 1;
-        for (int k = 1; k <= 2 * m; ++k) ratio /= k;  // 0!/(2m)!
-      } else if (l == m + 1) {
-        q = z * static_cast<T>(2 * m + 1) * q_prev;
-        ratio *= static_cast<double>(l - m) / static_cast<double>(l + m);
-      } else {
-        q = (static_cast<T>(2 * l - 1) * z * q_prev - static_cast<T>(l + m - 1) * q_prev2) /
-            static_cast<T>(l - m);
-        ratio *= static_cast<double>(l - m) / static_cast<double>(l + m);
-      }
-      const double k_lm = std::sqrt((2 * l + 1) * kInvFourPi * ratio);
-      if (m == 0) {
-        out[Index(l, 0)] = static_cast<T>(k_lm) * q;
-      } else {
-        const T scale = static_cast<T>(std::numbers::sqrt2 * k_lm) * q;
-        out[Index(l, m)] = scale * c;
-        out[Index(l, -m)] = scale * s;
-      }
-      q_prev2 = q_prev;
-      q_prev = q;
-    }
-  }
-}
-
 // The normalisation EvaluateBasis applies, per band l and order m >= 0 at index l (l + 1) + m:
 // K_l^m = sqrt((2l + 1) / (4 pi) (l - m)! / (l + m)!), times sqrt(2) for m > 0 (real basis).
 // Entries for l >= 5 are 0. Multiply it by per-band factors (e.g. A_l, ClampedCosineCoefficient)
@@ -121,7 +75,7 @@ std::array<double, 25> BasisNormalisation();
 // same recurrence and convention, with the normalisation (and any per-(l, |m|) factor) taken from
 // weight[l (l + 1) + m], m >= 0. With Accumulate, adds to out instead of writing:
 //   out[Index(l, 0)] (+)= w_l0 Q_l^0,  out[Index(l, +-m)] (+)= w_lm Q_l^m (Re, Im of (x + i y)^m).
-// weight = BasisNormalisation() gives EvaluateBasis's values (to rounding).
+// weight = BasisNormalisation() gives EvaluateBasis (which is this, with that table).
 template <int Bands, bool Accumulate, typename T>
 inline void EvaluateWeightedBasis(const T* weight, T x, T y, T z, T* out) {
   static_assert(Bands >= 1 && Bands <= 5, "EvaluateWeightedBasis: 1..5 bands");
@@ -162,6 +116,46 @@ inline void EvaluateWeightedBasis(const T* weight, T x, T y, T z, T* out) {
       q_prev2 = q_prev;
       q_prev = q;
     }
+  }
+}
+
+namespace internal {
+// BasisNormalisation() converted to T, computed once.
+template <typename T>
+const T* BasisNormalisationTable() {
+  static const std::array<T, 25> table = [] {
+    const std::array<double, 25> k = BasisNormalisation();
+    std::array<T, 25> t{};
+    for (size_t i = 0; i < t.size(); ++i) t[i] = static_cast<T>(k[i]);
+    return t;
+  }();
+  return table.data();
+}
+}  // namespace internal
+
+// Writes Y_0..Y_{bands^2-1} at the unit direction (x, y, z) to out[0..bands^2): the recurrence in z
+// on Q_l^m = P_l^m(z) / sin^m(theta) (Condon-Shortley phase in Q_m^m), with sin^m(theta) cos(m phi)
+// = Re((x + i y)^m) and sin^m(theta) sin(m phi) = Im((x + i y)^m) (EvaluateWeightedBasis with
+// BasisNormalisation). The direction is not normalised here (non-unit input gives the homogeneous
+// polynomials, scaled). bands must be 1..5 (asserted only: this is the hot path; use Basis() for a
+// checked call).
+template <typename T>
+inline void EvaluateBasis(int bands, T x, T y, T z, T* out) {
+  assert(bands >= 1 && bands <= 5);
+  const T* k = internal::BasisNormalisationTable<T>();
+  switch (bands) {
+    case 1:
+      return EvaluateWeightedBasis<1, false>(k, x, y, z, out);
+    case 2:
+      return EvaluateWeightedBasis<2, false>(k, x, y, z, out);
+    case 3:
+      return EvaluateWeightedBasis<3, false>(k, x, y, z, out);
+    case 4:
+      return EvaluateWeightedBasis<4, false>(k, x, y, z, out);
+    case 5:
+      return EvaluateWeightedBasis<5, false>(k, x, y, z, out);
+    default:
+      return;
   }
 }
 
