@@ -376,7 +376,10 @@ struct FaceTracker::Impl {
     }
     std::vector<cv::Mat> pyramid;
     const cv::Size window(21, 21);
-    cv::buildOpticalFlowPyramid(gray(track_region), pyramid, window, 3, false);
+    // Level 0 copied (tryReuseInputImage false): the pyramid outlives `gray`, which the next
+    // frame overwrites.
+    cv::buildOpticalFlowPyramid(gray(track_region), pyramid, window, 3, false,
+                                cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
     std::vector<uint8_t> status, status_back;
     std::vector<float> error;
     const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 20, 0.03);
@@ -420,7 +423,8 @@ struct FaceTracker::Impl {
       if ((track_region & equalized_area) != track_region) EqualizeRegion(track_region);
     }
     if (!options.flow_tracking || have_pyramid || track_region.empty()) return;
-    cv::buildOpticalFlowPyramid(gray(track_region), previous_pyramid, cv::Size(21, 21), 3, false);
+    cv::buildOpticalFlowPyramid(gray(track_region), previous_pyramid, cv::Size(21, 21), 3, false,
+                                cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
   }
 
   FaceTrack Finish(const std::array<Point2f, kLandmarkCount>& lms, bool detected,
