@@ -134,6 +134,29 @@ int OrientationBin(const float* t) {
   return (face * kCells + a) * kCells + b;
 }
 
+// Orientation-bin thinning (EstimateOptions::max_rows_per_bin): with bin[i] the orientation bin of
+// row i and count[b] the rows per bin, a bin with more than `cap` rows keeps every k-th of them
+// (k = ceil(count / cap)); the rare orientations that pin the light down keep all their rows, the
+// big planes lose most of theirs. Compacts rows (cc values each), targets and rgb (3 values each,
+// if not null), bin and count in place to the kept rows and returns how many there are.
+size_t ThinByOrientation(float* rows, float* targets, float* rgb, size_t m, int cc, int cap,
+                         std::vector<int>& bin, std::vector<int>& count) {
+  std::vector<int> seen(kOrientationBins, 0), kept(kOrientationBins, 0);
+  size_t n = 0;
+  for (size_t i = 0; i < m; ++i) {
+    const int b = bin[i];
+    const int k = (count[b] + cap - 1) / cap;
+    if (seen[b]++ % k != 0) continue;
+    std::copy_n(rows + i * cc, cc, rows + n * cc);
+    if (rgb != nullptr) std::copy_n(rgb + 3 * i, 3, rgb + 3 * n);
+    targets[n] = targets[i];
+    bin[n++] = b;
+    ++kept[b];
+  }
+  count = kept;
+  return n;
+}
+
 }  // namespace
 
 LightEstimate SolveLight(std::span<const float> rows, std::span<const float> targets,
@@ -168,33 +191,19 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
       bin[i] = OrientationBin(rows.data() + i * cc);
       ++count[bin[i]];
     }
-    // Thinning: a bin with more than max_rows_per_bin rows keeps every k-th of them (its total
-    // weight is the same after balancing); the rare orientations that pin the light down keep
-    // all their rows, the big planes lose most of theirs.
+    // Thinning (ThinByOrientation; each bin's total weight is the same after balancing), only
+    // when some bin is over the cap.
     const int kCap = options.max_rows_per_bin;
-    if (kCap > 0) {
+    if (kCap > 0 && std::any_of(count.begin(), count.end(), [&](int c) { return c > kCap; })) {
+      thin_rows.assign(rows.begin(), rows.end());
+      thin_targets.assign(targets.begin(), targets.end());
+      m = ThinByOrientation(thin_rows.data(), thin_targets.data(), nullptr, m, cc, kCap, bin,
+                            count);
       thin_rows.resize(m * cc);
       thin_targets.resize(m);
-      std::vector<int> seen(kOrientationBins, 0), kept(kOrientationBins, 0);
-      size_t n = 0;
-      for (size_t i = 0; i < m; ++i) {
-        const int b = bin[i];
-        const int k = (count[b] + kCap - 1) / kCap;
-        if (seen[b]++ % k != 0) continue;
-        std::copy_n(rows.data() + i * cc, cc, &thin_rows[n * cc]);
-        thin_targets[n] = targets[i];
-        bin[n++] = b;
-        ++kept[b];
-      }
-      if (n < m) {
-        thin_rows.resize(n * cc);
-        thin_targets.resize(n);
-        rows = thin_rows;
-        targets = thin_targets;
-        m = n;
-        count = kept;
-        prior.resize(m);
-      }
+      rows = thin_rows;
+      targets = thin_targets;
+      prior.resize(m);
     }
     int used = 0;
     for (int c : count) used += c > 0;
@@ -453,17 +462,10 @@ LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targe
   // Thin the big orientation bins here already (SolveLight would do it in every alternation), so
   // that the albedo updates run over the same few thousand rows.
   if (options.balance_normals && options.max_rows_per_bin > 0) {
-    std::vector<int> bin(m), count(kOrientationBins, 0), seen(kOrientationBins, 0);
+    std::vector<int> bin(m), count(kOrientationBins, 0);
     for (size_t i = 0; i < m; ++i) ++count[bin[i] = OrientationBin(&rows[i * cc_out])];
-    size_t n = 0;
-    for (size_t i = 0; i < m; ++i) {
-      const int k = (count[bin[i]] + options.max_rows_per_bin - 1) / options.max_rows_per_bin;
-      if (seen[bin[i]]++ % k != 0) continue;
-      std::copy_n(&rows[i * cc_out], cc_out, &rows[n * cc_out]);
-      std::copy_n(&rgb[3 * i], 3, &rgb[3 * n]);
-      targets[n++] = targets[i];
-    }
-    m = n;
+    m = ThinByOrientation(rows.data(), targets.data(), rgb.data(), m, cc_out,
+                          options.max_rows_per_bin, bin, count);
     rows.resize(m * cc_out);
     targets.resize(m);
   }
