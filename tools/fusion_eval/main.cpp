@@ -24,7 +24,8 @@
 // FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m), FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m),
 // FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_MERGE_GATE /
 // FUSION_EVAL_MERGE_MAJORITY (0 = the paper's eq. 3-5 exactly), FUSION_EVAL_DEPTH_SCALE (multiplies
-// the depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy).
+// the depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy),
+// FUSION_EVAL_K1 (k1[,k2]: radial undistortion of the depth images, nearest neighbour).
 // --min-inliers overrides the tracking-quality threshold.
 //
 // Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
@@ -358,6 +359,26 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   }
   if (frames.empty()) throw UsageError("no frames in '" + dir + "'");
   if (const char* fo = std::getenv("FUSION_EVAL_FOCAL")) k.fx = k.fy = std::atof(fo);
+  if (const char* kd = std::getenv("FUSION_EVAL_K1")) {  // experiment: radial undistortion k1[,k2]
+    float k1 = 0, k2 = 0;
+    std::sscanf(kd, "%f,%f", &k1, &k2);
+    for (Frame& fr : frames) {
+      recon::DepthImage out;
+      out.Resize(fr.depth.width, fr.depth.height);
+      for (int v = 0; v < fr.depth.height; ++v)
+        for (int u = 0; u < fr.depth.width; ++u) {
+          const float x = (u - k.cx) / k.fx, y = (v - k.cy) / k.fy, r2 = x * x + y * y;
+          const float s = 1 + k1 * r2 + k2 * r2 * r2;
+          const int ud = static_cast<int>(std::lround(k.fx * x * s + k.cx));
+          const int vd = static_cast<int>(std::lround(k.fy * y * s + k.cy));
+          out.data[v * out.width + u] =
+              (ud >= 0 && vd >= 0 && ud < fr.depth.width && vd < fr.depth.height)
+                  ? fr.depth.data[vd * fr.depth.width + ud]
+                  : 0.0f;
+        }
+      fr.depth = std::move(out);
+    }
+  }
   if (const char* dm = std::getenv("FUSION_EVAL_DEPTH_MAX")) {
     const float m = std::atof(dm);
     for (Frame& fr : frames)
