@@ -258,7 +258,8 @@ TEST(LayoutHashTest, DescriptionsListEveryField) {
   const std::string image = Image::LayoutDescription();
   for (const char* field :
        {"header:probeless_msgs/Header{", "width:u32@56;", "height:u32@60;", "step:u32@64;",
-        "encoding:Encoding{invalid=0,rgb8=1,bgr8=2,mono8=3,mono16=4,depth16=5,float32=6}:u32@68;",
+        "encoding:Encoding{invalid=0,rgb8=1,bgr8=2,mono8=3,mono16=4,depth16=5,float32=6,rgb32f=7}:"
+        "u32@68;",
         "reserved:u8[56]@72;"}) {
     EXPECT_NE(image.find(field), std::string::npos) << field << " in " << image;
   }
@@ -346,6 +347,8 @@ TEST(ImageTest, SizeHelpers) {
   EXPECT_EQ(BytesPerPixel(Encoding::kMono16), 2u);
   EXPECT_EQ(BytesPerPixel(Encoding::kDepth16), 2u);
   EXPECT_EQ(BytesPerPixel(Encoding::kFloat32), 4u);
+  EXPECT_EQ(BytesPerPixel(Encoding::kRgb32f), 12u);
+  EXPECT_EQ(ChannelCount(Encoding::kRgb32f), 3u);
   EXPECT_EQ(BytesPerPixel(Encoding::kInvalid), 0u);
   EXPECT_EQ(BytesPerPixel(static_cast<Encoding>(99)), 0u);
   EXPECT_EQ(Image::PackedPayloadBytes(640, 480, Encoding::kRgb8), 921'600u);
@@ -361,13 +364,27 @@ TEST(ImageTest, SizeHelpers) {
 
 TEST(ImageTest, EncodingNamesRoundTrip) {
   for (Encoding e : {Encoding::kRgb8, Encoding::kBgr8, Encoding::kMono8, Encoding::kMono16,
-                     Encoding::kDepth16, Encoding::kFloat32}) {
+                     Encoding::kDepth16, Encoding::kFloat32, Encoding::kRgb32f}) {
     EXPECT_EQ(EncodingFromName(EncodingName(e)), e);
   }
   EXPECT_EQ(EncodingName(static_cast<Encoding>(42)), "invalid");
   EXPECT_EQ(ErrorOf([] { EncodingFromName("16UC1"); }),
-            "unknown image encoding '16UC1' (expected rgb8, bgr8, mono8, mono16, depth16 or "
-            "float32)");
+            "unknown image encoding '16UC1' (expected rgb8, bgr8, mono8, mono16, depth16, float32 "
+            "or rgb32f)");
+}
+
+TEST(ImageTest, Rgb32fRowsAreThreeFloatsPerPixel) {
+  Slot slot(Image::MessageBytesFor(2, 2, Encoding::kRgb32f));
+  WriteView<Image> out = WriteMessage<Image>(slot.bytes());
+  out->Init(2, 2, Encoding::kRgb32f);
+  EXPECT_EQ(out->step, 24u);
+  std::span<float> row1 = ImageRow<float>(*out, out.payload, 1);
+  ASSERT_EQ(row1.size(), 6u);
+  row1[5] = 0.25f;  // pixel (1, 1), blue
+  ReadView<Image> in = ReadMessage<Image>(slot.cbytes());
+  EXPECT_EQ(ImageChannels<float>(*in, in.payload)[11], 0.25f);
+  EXPECT_EQ(ErrorOf([&] { ImageChannels<uint8_t>(*in, in.payload); }),
+            "Image 2x2 rgb32f (step 24): encoding rgb32f has float32 channels, not uint8");
 }
 
 TEST(ImageTest, TypedAccessorsHonourStepAndRejectBadRequests) {

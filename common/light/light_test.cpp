@@ -239,6 +239,23 @@ TEST(Transfer, IndirectLightBouncesAcrossTheValley) {
   const int corner = 60 * 160 + 82, open = 60 * 160 + 140;
   EXPECT_GT(r.indirect[3 * corner], 1e-3);
   EXPECT_EQ(r.indirect[3 * open], 0.0f);
+
+  // As the node publishes it: an rgb32f image with the same values, pixel-major R G B.
+  const size_t bytes = msgs::Image::MessageBytesFor(160, 120, msgs::Encoding::kRgb32f);
+  std::vector<std::byte> storage(bytes + 64);  // bus slots are 64-byte aligned
+  const size_t pad = (64 - reinterpret_cast<uintptr_t>(storage.data()) % 64) % 64;
+  auto out = msgs::WriteMessage<msgs::Image>(std::span(storage).subspan(pad, bytes));
+  light::FillIndirectImage(r, out.message, out.payload);
+  EXPECT_EQ(out->encoding, msgs::Encoding::kRgb32f);
+  EXPECT_EQ(out->width, 160u);
+  const auto row = msgs::ImageRow<float>(*out, out.payload, 60);
+  EXPECT_EQ(row[3 * 82 + 1], r.indirect[3 * corner + 1]);
+  EXPECT_EQ(ErrorOf([&] { light::FillIndirectImage(r, out.message, out.payload.first(100)); }),
+            "light::FillIndirectImage: payload of 100 bytes, need 230400");
+  computer.Compute(scene.View(), {}, nullptr, &r);  // no dominant light: no indirect buffer
+  EXPECT_EQ(ErrorOf([&] { light::FillIndirectImage(r, out.message, out.payload); }),
+            "light::FillIndirectImage: the transfer result has no indirect buffer (0 values for "
+            "160x120 pixels; Compute needs a DominantLight)");
 }
 
 TEST(Transfer, AuxiliaryViewOccludes) {

@@ -199,7 +199,7 @@ TEST(ImageConversionTest, DecodeErrors) {
   EXPECT_EQ(DecodeRos2(converter, image_cdr("rgb8", 1, 9, 18)).size(), sizeof(m::Image) + 18);
   EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, image_cdr("yuv422", 0, 6, 12)); }),
             "CDR sensor_msgs/msg/Image: field 'encoding' at offset 39: unsupported image "
-            "encoding 'yuv422' (expected rgb8, bgr8, mono8, mono16, 16UC1 or 32FC1)");
+            "encoding 'yuv422' (expected rgb8, bgr8, mono8, mono16, 16UC1, 32FC1 or 32FC3)");
   EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, image_cdr("mono16", 1, 6, 12)); }),
             "CDR sensor_msgs/msg/Image: field 'is_bigendian' at offset 40: big-endian mono16 "
             "pixels are not supported");

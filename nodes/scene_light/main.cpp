@@ -11,7 +11,10 @@
 // Outputs: `scene/light` (msgs::ShLight, white light in the camera frame, bands = param bands,
 //   dominant direction, intensity, confidence; header of the triggering message) and, with
 //   publish_transfer, `scene/transfer` (msgs::TransferBuffer, the per-pixel T for differential
-//   rendering). A frame without camera info or image yet is skipped (one warning).
+//   rendering), and with publish_indirect `scene/indirect` (msgs::Image rgb32f, the one-bounce
+//   indirect light of eq. 10-12 from the previous frame's dominant light: linear RGB radiance for
+//   albedo 1; from the second frame on, none while no light has been estimated). A frame without
+//   camera info or image yet is skipped (one warning).
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
 //   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
 //   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
@@ -20,7 +23,7 @@
 //   gbuffer_normals ("fusion": G_r's normals; "depth": recomputed from G_r's depth, step
 //   max(2, w / 160)), normal_filter (false: light::FilterNormals on the normals), temporal_frames
 //   (1 = off; light::TemporalLightEstimator over that many frames, camera rotation not
-//   compensated), forgetting (0.5), temporal_reset_ratio (1.3).
+//   compensated), forgetting (0.5), temporal_reset_ratio (1.3), publish_indirect (false).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -64,6 +67,7 @@ int Run(int argc, char** argv) {
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
   const bool publish_transfer = node.Param("publish_transfer", true);
+  const bool publish_indirect = node.Param("publish_indirect", false);
   const std::string gbuffer_normals = node.Param("gbuffer_normals", "fusion");
   if (gbuffer_normals != "fusion" && gbuffer_normals != "depth") {
     throw node::UsageError("scene_light: gbuffer_normals must be fusion or depth, got '" +
@@ -83,8 +87,9 @@ int Run(int argc, char** argv) {
                                     ? node.CreateSubscriber<msgs::GeometryBuffer>("scene/gbuffer")
                                     : node.CreateSubscriber<msgs::Image>("camera/depth");
   bus::Publisher light_pub = node.CreatePublisher<msgs::ShLight>("scene/light");
-  std::optional<bus::Publisher> transfer_pub;
-  size_t transfer_capacity = 0;
+  std::optional<bus::Publisher> transfer_pub, indirect_pub;
+  size_t transfer_capacity = 0, indirect_capacity = 0;
+  std::optional<light::DominantLight> dominant;  // the last published estimate's (eq. 10)
 
   std::optional<msgs::CameraInfo> info;
   std::optional<bus::Sample> image;  // the latest image sample (held)
@@ -145,7 +150,8 @@ int Run(int argc, char** argv) {
                    << header.sequence;
     }
     light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
-    computer.Compute(view, {}, nullptr, &result);
+    const bool indirect = publish_indirect && dominant.has_value();
+    computer.Compute(view, {}, indirect ? &*dominant : nullptr, &result);
     const light::LightEstimate e = tmo.frames > 1 ? temporal.Estimate(result, grey, eo, rgb)
                                                   : light::EstimateLight(result, grey, eo, rgb);
     ++frames;
@@ -156,6 +162,7 @@ int Run(int argc, char** argv) {
       light::FillShLight(e, out.message);
       light_pub.Publish(std::move(loan));
       ++published;
+      dominant = light::DominantLight{e.dominant_direction, e.intensity};
     }
     if (publish_transfer) {
       const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
@@ -173,6 +180,21 @@ int Run(int argc, char** argv) {
       const auto dst = msgs::TransferCoefficients(*out.message, out.payload);
       std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
       transfer_pub->Publish(std::move(loan));
+    }
+    if (indirect) {
+      const size_t bytes =
+          msgs::Image::MessageBytesFor(result.width, result.height, msgs::Encoding::kRgb32f);
+      if (!indirect_pub || bytes > indirect_capacity) {
+        indirect_pub.reset();
+        indirect_pub.emplace(
+            node.CreatePublisher<msgs::Image>("scene/indirect", {.max_message_bytes = bytes}));
+        indirect_capacity = bytes;
+      }
+      bus::Loan loan = indirect_pub->Borrow(bytes);
+      auto out = msgs::WriteMessage<msgs::Image>(loan.data());
+      out->header = header;
+      light::FillIndirectImage(result, out.message, out.payload);
+      indirect_pub->Publish(std::move(loan));
     }
   };
 

@@ -1,8 +1,9 @@
 // launch/scene_light_sim.yaml with 3 frames of data/scenarios/courtyard_sun.yaml: the sim
 // in lock-step with scene_light (depth mode, normals from the sensor depth); one /scene/light and
 // one /scene/transfer per frame, paired with /groundtruth/light by header.sequence, plausible
-// (valid bands, unit direction, confidence in [0, 1], transfer 640x480x16); plus the node's
-// one-line error for a bad mode.
+// (valid bands, unit direction, confidence in [0, 1], transfer 640x480x16); with indirect:=true
+// one /scene/indirect (rgb32f 640x480, finite, non-negative, lit somewhere) for every frame after
+// the first (it needs the previous frame's light); plus the node's one-line error for a bad mode.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -30,6 +31,14 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
                          {.queue_depth = 64});
   bus::Subscriber transfers("/scene/transfer", msgs::TopicTypeOf<msgs::TransferBuffer>(),
                             {.queue_depth = 8});
+  bus::Subscriber indirects("/scene/indirect", msgs::TopicTypeOf<msgs::Image>(),
+                            {.queue_depth = 8});
+  struct IndirectStats {
+    uint32_t width = 0, height = 0;
+    msgs::Encoding encoding = msgs::Encoding::kInvalid;
+    size_t non_finite = 0, negative = 0, lit = 0;
+  };
+  std::map<uint64_t, IndirectStats> indirect;
   std::map<uint64_t, msgs::ShLight> estimated, truth;
   std::map<uint64_t, std::array<uint32_t, 3>> transfer_shape;
   std::atomic<bool> stop{false};
@@ -52,6 +61,19 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
         transfer_shape[m->header.sequence] = {m->width, m->height, m->coefficient_count};
         any = true;
       }
+      while (auto s = indirects.TryTake()) {
+        const auto m = msgs::ReadMessage<msgs::Image>(s->data());
+        IndirectStats st{m->width, m->height, m->encoding};
+        if (m->encoding == msgs::Encoding::kRgb32f) {
+          for (float v : msgs::ImageChannels<float>(*m, m.payload)) {
+            st.non_finite += !std::isfinite(v);
+            st.negative += v < 0;
+            st.lit += v > 1e-6f;
+          }
+        }
+        indirect[m->header.sequence] = st;
+        any = true;
+      }
       if (!any) std::this_thread::sleep_for(1ms);
     }
   });
@@ -59,7 +81,7 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
   const std::string command =
       std::string(PROBELESS_BIN_DIR) + "/probeless launch " + PROBELESS_SOURCE_DIR +
       "/launch/scene_light_sim.yaml frames:=3 " + "scenario:=" + PROBELESS_SOURCE_DIR +
-      "/data/scenarios/courtyard_sun.yaml < /dev/null > /dev/null 2> " + err;
+      "/data/scenarios/courtyard_sun.yaml indirect:=true < /dev/null > /dev/null 2> " + err;
   const int status = std::system(command.c_str());
   std::this_thread::sleep_for(300ms);
   stop = true;
@@ -76,6 +98,17 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
   EXPECT_EQ(truth.size(), 3u) << log;
   ASSERT_EQ(estimated.size(), 3u) << log;
   EXPECT_EQ(transfer_shape.size(), 3u);
+  ASSERT_EQ(indirect.size(), 2u) << log;  // frames 2 and 3: frame 1 has no previous light
+  EXPECT_FALSE(indirect.count(estimated.begin()->first));
+  for (const auto& [seq, st] : indirect) {
+    EXPECT_EQ(st.encoding, msgs::Encoding::kRgb32f) << "frame " << seq;
+    EXPECT_EQ(st.width, 640u);
+    EXPECT_EQ(st.height, 480u);
+    EXPECT_EQ(st.non_finite, 0u) << "frame " << seq;
+    EXPECT_EQ(st.negative, 0u) << "frame " << seq;
+    // Courtyard: the sunlit ground and walls bounce light into the corners and under the table.
+    EXPECT_GT(st.lit, 640u * 480u * 3 / 100) << "frame " << seq;
+  }
   for (const auto& [seq, e] : estimated) {
     ASSERT_TRUE(truth.count(seq)) << "no ground truth for frame " << seq;
     EXPECT_EQ(e.bands, 4u);

@@ -129,4 +129,24 @@ void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale) {
   out->confidence = std::clamp(e.confidence, 0.0f, 1.0f);
 }
 
+void FillIndirectImage(const TransferResult& result, msgs::Image* out,
+                       std::span<std::byte> payload) {
+  const size_t pixels = static_cast<size_t>(result.width) * result.height;
+  if (result.indirect.size() != 3 * pixels || pixels == 0) {
+    throw LightError("light::FillIndirectImage: the transfer result has no indirect buffer (" +
+                     std::to_string(result.indirect.size()) + " values for " +
+                     std::to_string(result.width) + "x" + std::to_string(result.height) +
+                     " pixels; Compute needs a DominantLight)");
+  }
+  const size_t bytes =
+      msgs::Image::PackedPayloadBytes(result.width, result.height, msgs::Encoding::kRgb32f);
+  if (payload.size() < bytes) {
+    throw LightError("light::FillIndirectImage: payload of " + std::to_string(payload.size()) +
+                     " bytes, need " + std::to_string(bytes));
+  }
+  out->Init(result.width, result.height, msgs::Encoding::kRgb32f);
+  const std::span<float> dst = msgs::ImageChannels<float>(*out, payload);
+  std::copy(result.indirect.begin(), result.indirect.end(), dst.begin());
+}
+
 }  // namespace probeless::light

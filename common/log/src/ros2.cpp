@@ -253,6 +253,8 @@ std::string_view Ros2ImageEncoding(m::Encoding encoding) {
       return "16UC1";
     case m::Encoding::kFloat32:
       return "32FC1";
+    case m::Encoding::kRgb32f:
+      return "32FC3";
     case m::Encoding::kInvalid:
       break;
   }
@@ -300,13 +302,14 @@ class ImageConverter : public TypedConverter<m::Image, ImageFields> {
     f.height = in.Read<uint32_t>("height");
     f.width = in.Read<uint32_t>("width");
     const std::string encoding = in.String("encoding");
-    for (m::Encoding e : {m::Encoding::kRgb8, m::Encoding::kBgr8, m::Encoding::kMono8,
-                          m::Encoding::kMono16, m::Encoding::kDepth16, m::Encoding::kFloat32}) {
+    for (m::Encoding e :
+         {m::Encoding::kRgb8, m::Encoding::kBgr8, m::Encoding::kMono8, m::Encoding::kMono16,
+          m::Encoding::kDepth16, m::Encoding::kFloat32, m::Encoding::kRgb32f}) {
       if (Ros2ImageEncoding(e) == encoding) f.encoding = e;
     }
     if (f.encoding == m::Encoding::kInvalid) {
       in.Fail("encoding", "unsupported image encoding '" + encoding +
-                              "' (expected rgb8, bgr8, mono8, mono16, 16UC1 or 32FC1)");
+                              "' (expected rgb8, bgr8, mono8, mono16, 16UC1, 32FC1 or 32FC3)");
     }
     const uint8_t big_endian = in.Read<uint8_t>("is_bigendian");
     if (big_endian != 0 && m::BytesPerChannel(f.encoding) > 1) {

@@ -23,9 +23,11 @@ enum class Encoding : uint32_t {
   kDepth16 = 5,  // 1 x uint16 per pixel (16UC1), depth along the optical axis in millimetres,
                  // 0 = invalid (no measurement)
   kFloat32 = 6,  // 1 x float32 per pixel (32FC1); meaning given by the topic (e.g. depth in metres)
+  kRgb32f = 7,   // 3 x float32 per pixel (32FC3), R G B, linear (not sRGB); meaning and unit given
+                 // by the topic (e.g. scene/indirect: radiance for albedo 1)
 };
 constexpr std::string_view DescribeEnum(Encoding) {
-  return "Encoding{invalid=0,rgb8=1,bgr8=2,mono8=3,mono16=4,depth16=5,float32=6}";
+  return "Encoding{invalid=0,rgb8=1,bgr8=2,mono8=3,mono16=4,depth16=5,float32=6,rgb32f=7}";
 }
 
 // The encoding's name as used in params and docs ("rgb8", "depth16", ...); "invalid" for an
@@ -44,28 +46,31 @@ constexpr std::string_view EncodingName(Encoding encoding) {
       return "depth16";
     case Encoding::kFloat32:
       return "float32";
+    case Encoding::kRgb32f:
+      return "rgb32f";
     case Encoding::kInvalid:
       break;
   }
   return "invalid";
 }
 
-// The encoding named `name` ("rgb8", "bgr8", "mono8", "mono16", "depth16", "float32"). Throws
-// MessageError for any other name.
+// The encoding named `name` ("rgb8", "bgr8", "mono8", "mono16", "depth16", "float32", "rgb32f").
+// Throws MessageError for any other name.
 inline Encoding EncodingFromName(std::string_view name) {
   for (Encoding e : {Encoding::kRgb8, Encoding::kBgr8, Encoding::kMono8, Encoding::kMono16,
-                     Encoding::kDepth16, Encoding::kFloat32}) {
+                     Encoding::kDepth16, Encoding::kFloat32, Encoding::kRgb32f}) {
     if (EncodingName(e) == name) return e;
   }
   throw MessageError("unknown image encoding '" + std::string(name) +
-                     "' (expected rgb8, bgr8, mono8, mono16, depth16 or float32)");
+                     "' (expected rgb8, bgr8, mono8, mono16, depth16, float32 or rgb32f)");
 }
 
-// Channels per pixel (3 for rgb8/bgr8, else 1); 0 for an invalid encoding.
+// Channels per pixel (3 for rgb8/bgr8/rgb32f, else 1); 0 for an invalid encoding.
 constexpr uint32_t ChannelCount(Encoding encoding) {
   switch (encoding) {
     case Encoding::kRgb8:
     case Encoding::kBgr8:
+    case Encoding::kRgb32f:
       return 3;
     case Encoding::kMono8:
     case Encoding::kMono16:
@@ -89,6 +94,7 @@ constexpr uint32_t BytesPerChannel(Encoding encoding) {
     case Encoding::kDepth16:
       return 2;
     case Encoding::kFloat32:
+    case Encoding::kRgb32f:
       return 4;
     case Encoding::kInvalid:
       break;
@@ -96,7 +102,8 @@ constexpr uint32_t BytesPerChannel(Encoding encoding) {
   return 0;
 }
 
-// Bytes per pixel (3 for rgb8/bgr8, 1 mono8, 2 mono16/depth16, 4 float32); 0 for invalid.
+// Bytes per pixel (3 for rgb8/bgr8, 1 mono8, 2 mono16/depth16, 4 float32, 12 rgb32f); 0 for
+// invalid.
 constexpr uint32_t BytesPerPixel(Encoding encoding) {
   return ChannelCount(encoding) * BytesPerChannel(encoding);
 }
@@ -217,7 +224,7 @@ template <class T>
 void CheckChannelType(const Image& image) {
   const bool match = (std::is_same_v<T, uint8_t> && BytesPerChannel(image.encoding) == 1) ||
                      (std::is_same_v<T, uint16_t> && BytesPerChannel(image.encoding) == 2) ||
-                     (std::is_same_v<T, float> && image.encoding == Encoding::kFloat32);
+                     (std::is_same_v<T, float> && BytesPerChannel(image.encoding) == 4);
   if (!match) {
     throw MessageError("Image " + image.Describe() + ": encoding " +
                        std::string(EncodingName(image.encoding)) + " has " +
@@ -228,8 +235,8 @@ void CheckChannelType(const Image& image) {
 }  // namespace internal
 
 // All channels of the image as T (uint8_t for rgb8/bgr8/mono8, uint16_t for mono16/depth16, float
-// for float32): PayloadBytes() / sizeof(T) elements including any row padding (row y starts at
-// element y * step / sizeof(T)). `payload` is the payload of a ReadView/WriteView. Throws
+// for float32/rgb32f): PayloadBytes() / sizeof(T) elements including any row padding (row y starts
+// at element y * step / sizeof(T)). `payload` is the payload of a ReadView/WriteView. Throws
 // MessageError if the image is invalid (see Validate), the payload too small, or T does not match
 // the encoding.
 template <internal::Channel T>

@@ -1,6 +1,7 @@
 // Bus-message adapters of probeless_light: msgs::GeometryBuffer + CameraInfo -> GeometryView,
-// a raw depth16 image -> a G-buffer (the node's `depth` mode), results -> msgs::ShLight and
-// msgs::TransferBuffer. Errors are LightError / msgs::MessageError with one line.
+// a raw depth16 image -> a G-buffer (the node's `depth` mode), results -> msgs::ShLight,
+// msgs::TransferBuffer and the indirect buffer as an rgb32f msgs::Image. Errors are LightError /
+// msgs::MessageError with one line.
 #pragma once
 
 #include <cstddef>
@@ -45,5 +46,13 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
 // same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,
 // confidence.
 void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale = 1.0f);
+
+// Writes the one-bounce indirect buffer of `result` (TransferResult::indirect, eq. 10-12: linear
+// RGB radiance towards the camera for albedo 1, 0 where no surface) into `out` as an rgb32f image
+// of result.width x result.height (header left to the caller); `payload` is the message's payload
+// and must hold msgs::Image::PackedPayloadBytes(width, height, kRgb32f). Throws LightError if
+// `result` has no indirect buffer (Compute got no DominantLight) or the payload is too small.
+void FillIndirectImage(const TransferResult& result, msgs::Image* out,
+                       std::span<std::byte> payload);
 
 }  // namespace probeless::light
