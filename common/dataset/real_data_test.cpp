@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 
@@ -84,6 +86,51 @@ TEST(RealDataTest, SevenScenesRedKitchen) {
   EXPECT_NEAR(z_axis.x, -3.142243299999999961e-01, 1e-4);
   EXPECT_NEAR(z_axis.y, 4.527962600000000337e-02, 1e-4);
   EXPECT_NEAR(z_axis.z, 9.482093499999999509e-01, 1e-4);
+}
+
+// Mean colour gradient (grey, central differences) at the depth discontinuities (> 5 % jump to
+// the right or below) of frames 0, 50, 100, 150 of `source` (camera_info, image, depth, pose).
+double ColourGradientAtDepthEdges(Source& source) {
+  const std::vector<StreamMessage> messages = Drain(source);
+  double sum = 0;
+  long n = 0;
+  for (size_t f = 0; f * 4 + 2 < messages.size(); f += 50) {
+    const auto image = View<msgs::Image>(messages[f * 4 + 1]);
+    const auto depth = View<msgs::Image>(messages[f * 4 + 2]);
+    const auto rgb = msgs::ImageChannels<uint8_t>(*image, image.payload);
+    const auto z = msgs::ImageChannels<uint16_t>(*depth, depth.payload);
+    const int w = static_cast<int>(depth->width), h = static_cast<int>(depth->height);
+    auto grey = [&](int u, int v) {
+      const size_t i = 3 * (static_cast<size_t>(v) * w + u);
+      return (rgb[i] + rgb[i + 1] + rgb[i + 2]) / 3.0;
+    };
+    for (int v = 1; v + 1 < h; ++v) {
+      for (int u = 1; u + 1 < w; ++u) {
+        const double c = z[v * w + u], r = z[v * w + u + 1], d = z[(v + 1) * w + u];
+        const bool edge = c > 0 && ((r > 0 && std::abs(r - c) > 0.05 * c) ||
+                                    (d > 0 && std::abs(d - c) > 0.05 * c));
+        if (!edge) continue;
+        sum +=
+            std::abs(grey(u + 1, v) - grey(u - 1, v)) + std::abs(grey(u, v + 1) - grey(u, v - 1));
+        ++n;
+      }
+    }
+  }
+  return n > 0 ? sum / n : 0;
+}
+
+TEST(RealDataTest, SevenScenesColourIsRegisteredToDepth) {
+  REQUIRE_DATA("7scenes-redkitchen");
+  DatasetOptions options;
+  options.max_frames = 151;
+  const std::unique_ptr<Source> registered = OpenDataset(data_path, options);
+  options.register_colour = false;
+  const std::unique_ptr<Source> raw = OpenDataset(data_path, options);
+  const double with = ColourGradientAtDepthEdges(*registered);
+  const double without = ColourGradientAtDepthEdges(*raw);
+  std::printf("colour gradient at depth edges: registered %.1f, as recorded %.1f\n", with, without);
+  // Colour edges coincide with depth edges only when the images are registered.
+  EXPECT_GT(with, 1.8 * without);
 }
 
 TEST(RealDataTest, YaleBSubject01) {

@@ -17,9 +17,9 @@
 // (100) frames also run through OpenCV 4.6's kinfu TSDF volume (cv::kinfu::makeVolume, same
 // volume / truncation / max weight) and cv::rgbd::ICPOdometry (frame to frame, same 3-level
 // pyramid and iterations), adding peer_frames, peer_ms_per_frame_median, peer_ate_rmse_m,
-// peer_ate_aligned_rmse_m, speedup_median. 7-Scenes colour is not registered to depth: the merge
-// uses it unregistered as intensity guidance (documented approximation); tracking uses depth
-// only. The default volume is the library's (256^3 over 2 m, see recon::VolumeOptions).
+// peer_ate_aligned_rmse_m, speedup_median. 7-Scenes colour is registered to depth by the dataset
+// source (Kinect v1 nominal colour calibration, docs/dataset.md) and guides the merge; tracking
+// uses depth only. The default volume is the library's (256^3 over 2 m, see recon::VolumeOptions).
 // Tuning knobs for experiments (environment): FUSION_EVAL_ICP=a,b,c (iterations),
 // FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m), FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m),
 // FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_MERGE_GATE /

@@ -1,9 +1,11 @@
 // Microsoft 7-Scenes sequence folders: frame-XXXXXX.color.jpg|png, frame-XXXXXX.depth.png (uint16
 // millimetres, 0 and 65535 invalid), frame-XXXXXX.pose.txt (4x4 camera-to-world), optional
 // camera-intrinsics.txt (3x3).
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "camera_info_file.h"
 #include "image_io.h"
@@ -27,6 +29,53 @@ Intrinsics SevenScenesDefaultIntrinsics() {
   intrinsics.cx = 320;
   intrinsics.cy = 240;
   return intrinsics;
+}
+
+// The Kinect v1 colour camera as seen from its depth camera (nominal values; 7-Scenes ships no
+// colour calibration): pinhole at 640 x 480 and the depth-to-colour translation along x, metres.
+// Checked on the shared RedKitchen frames by the colour gradient at depth discontinuities
+// (docs/dataset.md): these values are the best of a grid around them.
+constexpr double kKinectColourFocal = 525;
+constexpr double kKinectColourCx = 320;
+constexpr double kKinectColourCy = 240;
+constexpr double kKinectColourBaseline = -0.025;
+
+// `colour` (any type) resampled onto the pixel grid of `depth_mm` (CV_16UC1, 0 = invalid) with
+// `depth` intrinsics: pixel (u, v) at depth z is the 3D point ((u - cx) z / fx, (v - cy) z / fy, z)
+// of the depth camera, seen by the Kinect colour camera above. Pixels without depth use the
+// frame's median depth (the parallax term is small: 525 * 0.025 / z px). Bilinear; outside the
+// colour image: black.
+cv::Mat RegisterColourToDepth(const cv::Mat& colour, const cv::Mat& depth_mm,
+                              const Intrinsics& depth) {
+  std::vector<uint16_t> valid;
+  valid.reserve(depth_mm.total() / 16);
+  for (int v = 0; v < depth_mm.rows; v += 4) {
+    for (int u = 0; u < depth_mm.cols; u += 4) {
+      if (const uint16_t z = depth_mm.at<uint16_t>(v, u); z != 0) valid.push_back(z);
+    }
+  }
+  double fill_m = 2.0;
+  if (!valid.empty()) {
+    std::nth_element(valid.begin(), valid.begin() + valid.size() / 2, valid.end());
+    fill_m = valid[valid.size() / 2] * 0.001;
+  }
+  cv::Mat map_x(depth_mm.size(), CV_32FC1), map_y(depth_mm.size(), CV_32FC1);
+  for (int v = 0; v < depth_mm.rows; ++v) {
+    const uint16_t* z_row = depth_mm.ptr<uint16_t>(v);
+    float* mx = map_x.ptr<float>(v);
+    float* my = map_y.ptr<float>(v);
+    const double y = (v - depth.cy) / depth.fy;
+    for (int u = 0; u < depth_mm.cols; ++u) {
+      const double z = z_row[u] != 0 ? z_row[u] * 0.001 : fill_m;
+      const double x = (u - depth.cx) / depth.fx;
+      mx[u] = static_cast<float>(kKinectColourFocal * (x + kKinectColourBaseline / z) +
+                                 kKinectColourCx);
+      my[u] = static_cast<float>(kKinectColourFocal * y + kKinectColourCy);
+    }
+  }
+  cv::Mat out;
+  cv::remap(colour, out, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(0));
+  return out;
 }
 
 // The frame number and part ("color.jpg", ...) of "frame-000012.color.jpg"; false otherwise.
@@ -96,7 +145,7 @@ class SevenScenesSource : public FrameSource {
                          ": expected 8-bit " + std::to_string(colour_size_.width) + "x" +
                          std::to_string(colour_size_.height) + " like the first frame");
     }
-    const cv::Mat colour = ConvertForEncoding(colour_file, msgs::Encoding::kRgb8, frame.colour);
+    cv::Mat colour = ConvertForEncoding(colour_file, msgs::Encoding::kRgb8, frame.colour);
 
     cv::Mat depth;
     if (depth_topic_) {
@@ -111,6 +160,10 @@ class SevenScenesSource : public FrameSource {
       // 65535 marks an invalid measurement in 7-Scenes; probeless uses 0.
       for (auto it = depth.begin<uint16_t>(); it != depth.end<uint16_t>(); ++it) {
         if (*it == 65535) *it = 0;
+      }
+      if (options_.register_colour && colour_size_ == cv::Size(640, 480) &&
+          depth_size_ == cv::Size(640, 480)) {
+        colour = RegisterColourToDepth(colour, depth, intrinsics_);
       }
     }
 

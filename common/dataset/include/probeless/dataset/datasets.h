@@ -37,6 +37,13 @@ struct DatasetOptions {
   std::string camera_frame_id = "camera";
   // Parent frame of ground-truth camera poses. At most 31 characters.
   std::string world_frame_id = "world";
+  // 7-Scenes only: resample each 640x480 colour image onto the depth image's pixel grid (bilinear,
+  // per-pixel parallax from the depth; holes at the frame's median depth) so that /camera/image is
+  // registered to /camera/depth, the convention of probeless cameras. 7-Scenes publishes no colour
+  // calibration: the colour camera is the Kinect v1's nominal one (fx = fy = 525 px, principal
+  // point (320, 240), 2.5 cm from the depth camera along x; docs/dataset.md shows the check).
+  // false, or frames of another size: the colour files as they are.
+  bool register_colour = true;
 };
 
 // The dataset kinds OpenDataset accepts in "kind:PATH", in the order auto-detection tries them:
