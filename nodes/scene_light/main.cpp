@@ -23,7 +23,11 @@
 //   gbuffer_normals ("fusion": G_r's normals; "depth": recomputed from G_r's depth, step
 //   max(2, w / 160)), normal_filter (false: light::FilterNormals on the normals), temporal_frames
 //   (1 = off; light::TemporalLightEstimator over that many frames, camera rotation not
-//   compensated), forgetting (0.5), temporal_reset_ratio (1.3), publish_indirect (false).
+//   compensated), forgetting (0.5), temporal_reset_ratio (1.3), light_model ("auto" = the point
+//   model when its selection rule prefers it, else §5.2's; "distant" = §5.2; "point" = near-field
+//   point lamps; light::EstimateSceneLight; temporal_frames > 1 implies distant and rejects an
+//   explicit point / auto), lamps (1; 2 = up to two lamps), publish_indirect (false).
+//   The lamp positions are not in msgs::ShLight: they go to the debug log.
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -35,6 +39,7 @@
 
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
+#include "probeless/light/point_light.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
@@ -78,6 +83,23 @@ int Run(int argc, char** argv) {
   tmo.frames = node.Param("temporal_frames", 1);
   tmo.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
   tmo.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
+  light::SceneLightOptions so;
+  so.model = light::ParseLightModel(node.Param("light_model", "auto"));  // LightError if bad
+  so.distant = eo;
+  so.point.albedo = eo.albedo;
+  so.point.albedo_groups = eo.albedo_groups;
+  so.point.max_lamps = node.Param("lamps", 1);
+  if (so.point.max_lamps < 1 || so.point.max_lamps > 2) {
+    throw node::UsageError("scene_light: lamps must be 1 or 2, got " +
+                           std::to_string(so.point.max_lamps));
+  }
+  if (so.model != light::LightModel::kDistant && tmo.frames > 1) {
+    // The temporal accumulator is a distant-light fit: the default auto gives way to it.
+    if (node.HasParamOverride("light_model")) {
+      throw node::UsageError("scene_light: temporal_frames > 1 needs light_model distant");
+    }
+    so.model = light::LightModel::kDistant;
+  }
   light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
   light::TransferComputer computer(to);         // throws LightError for bad options
 
@@ -152,8 +174,20 @@ int Run(int argc, char** argv) {
     light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
     const bool indirect = publish_indirect && dominant.has_value();
     computer.Compute(view, {}, indirect ? &*dominant : nullptr, &result);
-    const light::LightEstimate e = tmo.frames > 1 ? temporal.Estimate(result, grey, eo, rgb)
-                                                  : light::EstimateLight(result, grey, eo, rgb);
+    light::LightEstimate e;
+    if (tmo.frames > 1) {
+      e = temporal.Estimate(result, grey, eo, rgb);
+    } else if (so.model == light::LightModel::kDistant) {
+      e = light::EstimateLight(result, grey, eo, rgb);
+    } else {
+      light::SceneLightResult r = light::EstimateSceneLight(view, result, grey, so, rgb);
+      e = std::move(r.light);
+      if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
+        const auto& p = r.point.lamps[0].position;
+        node.Debug() << "frame " << header.sequence << ": point model, lamp at (" << p[0] << ", "
+                     << p[1] << ", " << p[2] << ") m, camera frame";
+      }
+    }
     ++frames;
     if (e.valid) {
       bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));

@@ -39,7 +39,14 @@
 // --filter-angle, --filter-view, --filter-jump), --temporal N / --forgetting F
 // (light::TemporalLightEstimator fed with the N - 1 frames before each evaluated one, camera
 // rotation from the simulator), --smooth-radius / --normal-step (normals of the sensor depth),
-// --no-balance.
+// --no-balance. --light-model distant|point|auto (light::EstimateSceneLight; default auto;
+// --temporal implies distant):
+// the near-field point-lamp fit (docs/light.md, "Near-field lamps"), --lamps K (1 or 2),
+// --point-rows N (rows of the point fit, PointLightOptions::max_rows); adds
+// per series `point_chosen_frames`, `cpu_ms_point_median` (the point fit's thread CPU time:
+// EstimateSceneLight minus EstimateLight) and `lamp_position_error_m_median` (the chosen model's
+// strongest lamp to the nearest enabled true lamp, --sim; point frames only); --plots adds
+// scene_light_lamps.png.
 #include "probeless/node/main.h"
 
 #include <time.h>
@@ -62,6 +69,7 @@
 
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
+#include "probeless/light/point_light.h"
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
@@ -116,6 +124,10 @@ struct Options {
   float forgetting = 0.5f;  // --forgetting F
   bool no_balance = false;  // --no-balance: no normal-orientation balancing (ablation)
   bool mix = false;  // --mix: hybrids of clean and sensor inputs (which sensor effect costs what)
+  light::LightModel light_model = light::LightModel::kAuto;  // --light-model
+  bool light_model_set = false;                              // --light-model given
+  int lamps = 1;                                             // --lamps K
+  int point_rows = 0;  // --point-rows N: PointLightOptions::max_rows (0 = its default)
 };
 
 // One evaluated frame of one variant.
@@ -131,6 +143,14 @@ struct Sample {
   std::vector<double> estimate;   // coefficients
   std::array<float, 27> truth{};  // 9 x RGB
   std::array<float, 3> estimate_dir{0, 0, 0}, truth_dir{0, 0, 0};  // camera frame, 0 = none
+  // --light-model point|auto: whether the point model was chosen, the point fit's CPU ms, its
+  // strongest lamp and the true enabled lamps (camera frame), the lamp error (m).
+  bool point_chosen = false;
+  double cpu_ms_point = NAN;
+  std::array<float, 3> lamp{NAN, NAN, NAN};
+  std::vector<std::array<float, 3>> true_lamps;
+  double lamp_error_m = NAN;
+  double point_gain = NAN, spread_deg = NAN;  // the auto rule's inputs (PointLightEstimate)
 };
 
 struct Series {
@@ -156,8 +176,12 @@ std::string Num(double v) {
 }
 
 std::string SeriesJson(const Series& s) {
-  std::vector<double> dir, dir_cam, sh_err, ms_t, ms_e, cpu_t, cpu_e;
+  std::vector<double> dir, dir_cam, sh_err, ms_t, ms_e, cpu_t, cpu_e, cpu_p, lamp_err;
+  int point_chosen = 0;
   for (const auto& x : s.samples) {
+    cpu_p.push_back(x.cpu_ms_point);
+    lamp_err.push_back(x.lamp_error_m);
+    point_chosen += x.point_chosen ? 1 : 0;
     dir.push_back(x.dir_error_deg);
     dir_cam.push_back(x.dir_error_camera_deg);
     sh_err.push_back(x.sh_rel_error);
@@ -176,14 +200,17 @@ std::string SeriesJson(const Series& s) {
     << ", \"cpu_ms_transfer_median\": " << Num(Quantile(cpu_t, 0.5))
     << ", \"cpu_ms_estimate_median\": " << Num(Quantile(cpu_e, 0.5))
     << ", \"dominant_dir_error_vs_camera_light_deg_median\": " << Num(Quantile(dir_cam, 0.5))
-    << "}";
+    << ", \"point_chosen_frames\": " << point_chosen
+    << ", \"cpu_ms_point_median\": " << Num(Quantile(cpu_p, 0.5))
+    << ", \"lamp_position_error_m_median\": " << Num(Quantile(lamp_err, 0.5)) << "}";
   return o.str();
 }
 
 struct Variant {
   light::TransferComputer computer;
   light::EstimateOptions estimate;
-  light::TransferResult result;  // reused across frames, as the node does
+  light::SceneLightOptions scene;  // --light-model: scene.distant = estimate
+  light::TransferResult result;    // reused across frames, as the node does
   Series clean, noisy, fused;
   std::array<Series, 7> mix;  // --mix: clean geometry + sensor colour; sensor geometry + clean
                               // colour; clean normals and depth where the sensor has depth;
@@ -245,8 +272,8 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
                 std::span<const uint8_t> colour, const light::AuxiliaryBuffers& aux,
                 const msgs::ShLight& truth, double time_s,
                 const msgs::ShLight* camera_truth = nullptr,
-                light::TemporalLightEstimator* temporal = nullptr,
-                const float* rotation = nullptr) {
+                light::TemporalLightEstimator* temporal = nullptr, const float* rotation = nullptr,
+                const std::vector<std::array<float, 3>>* true_lamps = nullptr) {
   Sample s;
   s.time_s = time_s;
   light::TransferResult& t = v.result;
@@ -256,9 +283,35 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
   const auto t1 = Clock::now();
   s.cpu_ms_transfer = CpuMs() - c0;
   const double c1 = ThreadCpuMs();
-  const light::LightEstimate e = temporal != nullptr
-                                     ? temporal->Estimate(t, grey, v.estimate, colour, rotation)
-                                     : light::EstimateLight(t, grey, v.estimate, colour);
+  light::LightEstimate e;
+  if (temporal != nullptr) {
+    e = temporal->Estimate(t, grey, v.estimate, colour, rotation);
+  } else if (v.scene.model == light::LightModel::kDistant) {
+    e = light::EstimateLight(t, grey, v.estimate, colour);
+  } else {
+    light::EstimateLight(t, grey, v.estimate, colour);  // timed alone for cpu_ms_point
+    const double c_distant = ThreadCpuMs() - c1;
+    const double c2 = ThreadCpuMs();
+    const light::SceneLightResult r = light::EstimateSceneLight(g, t, grey, v.scene, colour);
+    const double c_scene = ThreadCpuMs() - c2;
+    s.cpu_ms_point = std::max(0.0, c_scene - c_distant);
+    e = r.light;
+    s.point_chosen = r.used == light::LightModel::kPoint;
+    if (r.point.median_residual_distant > 0) {
+      s.point_gain = 1 - r.point.median_residual_point / r.point.median_residual_distant;
+    }
+    s.spread_deg = r.point.spread_deg;
+    if (s.point_chosen && !r.point.lamps.empty()) {
+      s.lamp = r.point.lamps[0].position;
+      if (true_lamps != nullptr) {
+        s.true_lamps = *true_lamps;
+        for (const auto& l : *true_lamps) {
+          const double d = std::hypot(l[0] - s.lamp[0], l[1] - s.lamp[1], l[2] - s.lamp[2]);
+          if (std::isnan(s.lamp_error_m) || d < s.lamp_error_m) s.lamp_error_m = d;
+        }
+      }
+    }
+  }
   s.cpu_ms_estimate = ThreadCpuMs() - c1;
   const auto t2 = Clock::now();
   s.ms_transfer = std::chrono::duration<double, std::milli>(t1 - t0).count();
@@ -413,6 +466,45 @@ void WritePlots(const std::string& dir, const Series& full, const Series& fast) 
               "dominant direction vs time, camera frame: black + truth, blue full, orange fast",
               {m, 2 * PH + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.4, {0, 0, 0});
   cv::imwrite(dir + "/scene_light_direction.png", dirs);
+
+  // --light-model point|auto: the strongest estimated lamp (full blue, fast orange dots) and the
+  // true enabled lamps (black +) over time, camera-frame x, y, z (m).
+  bool any_lamp = false;
+  for (const auto& x : full.samples) any_lamp = any_lamp || std::isfinite(x.lamp[0]);
+  if (!any_lamp) return;
+  const int LH = 160;
+  cv::Mat lamps(3 * LH + 30, W, CV_8UC3, cv::Scalar(255, 255, 255));
+  const char* axes[3] = {"lamp x (m, right)", "lamp y (m, down)", "lamp z (m, forward)"};
+  const double lo[3] = {-3, -3, 0}, hi[3] = {3, 1, 5};
+  for (int a = 0; a < 3; ++a) {
+    const int top = a * LH;
+    auto to_y = [&](double v) {
+      return static_cast<int>(top + LH - 15 -
+                              (std::clamp(v, lo[a], hi[a]) - lo[a]) / (hi[a] - lo[a]) * (LH - 20));
+    };
+    cv::rectangle(lamps, {m, top + 5}, {W - 10, top + LH - 15}, {0, 0, 0});
+    for (double v = lo[a]; v <= hi[a]; v += 1) {
+      cv::line(lamps, {m, to_y(v)}, {W - 10, to_y(v)}, {220, 220, 220});
+      cv::putText(lamps, Num(v), {2, to_y(v) + 4}, cv::FONT_HERSHEY_SIMPLEX, 0.35, {0, 0, 0});
+    }
+    cv::putText(lamps, axes[a], {m + 4, top + 18}, cv::FONT_HERSHEY_SIMPLEX, 0.4, {0, 0, 0});
+    auto x_of = [&](double t) { return static_cast<int>(m + t / t_max * (W - m - 10)); };
+    for (const auto& x : full.samples) {
+      for (const auto& l : x.true_lamps) {
+        cv::drawMarker(lamps, {x_of(x.time_s), to_y(l[a])}, {0, 0, 0}, cv::MARKER_CROSS, 10, 2);
+      }
+    }
+    for (const auto* series : {&full, &fast}) {
+      for (const auto& x : series->samples) {
+        if (!std::isfinite(x.lamp[a])) continue;
+        cv::circle(lamps, {x_of(x.time_s), to_y(x.lamp[a])}, 3,
+                   series == &full ? cv::Scalar(200, 80, 0) : cv::Scalar(0, 120, 255), cv::FILLED);
+      }
+    }
+  }
+  cv::putText(lamps, "strongest estimated lamp (blue full, orange fast) and true lamps (black +)",
+              {m, 3 * LH + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.4, {0, 0, 0});
+  cv::imwrite(dir + "/scene_light_lamps.png", lamps);
 }
 
 int Run(int argc, char** argv) {
@@ -477,6 +569,18 @@ int Run(int argc, char** argv) {
       o.no_balance = true;
     else if (a == "--mix")
       o.mix = true;
+    else if (a == "--light-model") {
+      const std::string v = value();
+      try {
+        o.light_model = light::ParseLightModel(v);
+        o.light_model_set = true;
+      } catch (const light::LightError&) {
+        throw node::UsageError("--light-model must be distant, point or auto, got '" + v + "'");
+      }
+    } else if (a == "--lamps")
+      o.lamps = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--point-rows")
+      o.point_rows = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-size")
       o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-resolution")
@@ -508,6 +612,11 @@ int Run(int argc, char** argv) {
   if (o.frames < 1) throw node::UsageError("--frames must be >= 1");
   if (o.fused_step < 1) throw node::UsageError("--fused-step must be >= 1");
   if (o.fused && !o.log.empty()) throw node::UsageError("--fused needs --sim");
+  if (o.lamps < 1 || o.lamps > 2) throw node::UsageError("--lamps must be 1 or 2");
+  if (o.light_model != light::LightModel::kDistant && o.temporal > 1) {
+    if (o.light_model_set) throw node::UsageError("--temporal needs --light-model distant");
+    o.light_model = light::LightModel::kDistant;  // the accumulator is a distant-light fit
+  }
   light::TransferOptions full_o;
   full_o.directions = o.directions;
   full_o.bands = o.bands;
@@ -522,6 +631,13 @@ int Run(int argc, char** argv) {
   to.frames = o.temporal;
   to.forgetting = o.forgetting;
   Variant full(full_o, eo, to), fast(fast_o, eo, to);
+  for (Variant* v : {&full, &fast}) {
+    v->scene.model = o.light_model;
+    v->scene.distant = eo;
+    v->scene.point.max_lamps = o.lamps;
+    if (o.point_rows > 0) v->scene.point.max_rows = o.point_rows;
+    if (o.grey_world) v->scene.point.albedo_groups = 0;
+  }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
   const auto start = Clock::now();
   std::string source_name;
@@ -724,6 +840,20 @@ int Run(int argc, char** argv) {
         return m;
       };
       const msgs::ShLight camera_truth = to_msg(f.light);
+      // The enabled point lamps in the camera frame (lamp position error).
+      std::vector<std::array<float, 3>> true_lamps;
+      {
+        const raytrace::Transform& c2w = f.camera.camera_to_world;
+        const raytrace::Mat3 w2c = c2w.rotation.Transposed();
+        for (const auto& l : simulator.scene().point_lights()) {
+          if (!l.enabled) continue;
+          const raytrace::Vec3 d =
+              w2c * (l.position - raytrace::Vec3{static_cast<float>(c2w.translation[0]),
+                                                 static_cast<float>(c2w.translation[1]),
+                                                 static_cast<float>(c2w.translation[2])});
+          true_lamps.push_back({d.x, d.y, d.z});
+        }
+      }
       const msgs::ShLight truth =
           o.camera_truth ? camera_truth : to_msg(light::SurfaceLightingTruth(simulator.scene(), f));
       light::AuxiliaryStorage aux;
@@ -777,7 +907,7 @@ int Run(int argc, char** argv) {
           (sensor ? v->noisy : v->clean)
               .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
                                           f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
-                                          rot));
+                                          rot, &true_lamps));
         }
       }
       if (fusion) {
@@ -806,6 +936,19 @@ int Run(int argc, char** argv) {
             "\n  direction truth (%.2f %.2f %.2f) clean (%.2f %.2f %.2f) sensor (%.2f %.2f %.2f)",
             c.truth_dir[0], c.truth_dir[1], c.truth_dir[2], c.estimate_dir[0], c.estimate_dir[1],
             c.estimate_dir[2], n.estimate_dir[0], n.estimate_dir[1], n.estimate_dir[2]);
+        if (o.light_model != light::LightModel::kDistant) {
+          std::fprintf(stderr,
+                       "\n  point model: clean %s (gain %.2f, spread %.1f deg), lamp (%.2f %.2f "
+                       "%.2f) %.2f m off",
+                       c.point_chosen ? "chosen" : "not chosen", c.point_gain, c.spread_deg,
+                       c.lamp[0], c.lamp[1], c.lamp[2], c.lamp_error_m);
+          std::fprintf(
+              stderr, "; sensor %s (gain %.2f, spread %.1f deg), lamp %.2f m off; true lamps",
+              n.point_chosen ? "chosen" : "not chosen", n.point_gain, n.spread_deg, n.lamp_error_m);
+          for (const auto& l : c.true_lamps) {
+            std::fprintf(stderr, " (%.2f %.2f %.2f)", l[0], l[1], l[2]);
+          }
+        }
       }
       std::fprintf(stderr,
                    "\n  normals vs clean, median / p90 deg (coverage): sensor %.1f / %.1f (%.2f)",
@@ -881,7 +1024,8 @@ int Run(int argc, char** argv) {
       << (o.log.empty() && !o.camera_truth ? "surface" : "camera") << "\""
       << ",\n  \"albedo_groups\": " << eo.albedo_groups
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")
-      << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin
+      << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin << ",\n  \"light_model\": \""
+      << light::LightModelName(o.light_model) << "\",\n  \"lamps\": " << o.lamps
       << ",\n  \"temporal_frames\": " << o.temporal << ",\n  \"forgetting\": " << Num(o.forgetting)
       << ",\n  \"normal_filter\": "
       << (o.normal_filter
