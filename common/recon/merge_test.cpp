@@ -26,10 +26,12 @@ struct Inputs {
   }
 };
 
-// A 5 x 5 window without subsampling for D' (k = 4), so the support regions are easy to count.
+// A 5 x 5 window without subsampling for D' (k = 4), so the support regions are easy to count,
+// and the paper's fixed lambda_D in eq. 2 / 3 (the eq. 3 case tests are the paper's).
 MergeOptions SmallWindows() {
   MergeOptions o;
   o.merge_k = 4;
+  o.lambda_d_sigmas = 0;
   return o;
 }
 
@@ -191,6 +193,81 @@ TEST(DepthMerge, DepthGateStillDenoisesASurfaceNoisierThanLambdaD) {
   EXPECT_FLOAT_EQ(gated.smoothed.At(7, 7), 3.0f);
 }
 
+// Noise-scaled agreement threshold (MergeOptions::lambda_d_sigmas, a deviation from eq. 2 / 3).
+// Kinect v1 axial noise (Nguyen et al. 2012) at 1.5 m: 0.0012 + 0.0019 * 1.1^2 = 3.499 mm, so
+// 3 sigma = 10.5 mm; at 4 m: 0.0012 + 0.0019 * 3.6^2 = 25.82 mm, 3 sigma = 77 mm > lambda_D.
+MergeOptions NoiseScaled() {
+  MergeOptions o = SmallWindows();
+  o.lambda_d_sigmas = 3;
+  return o;
+}
+
+TEST(DepthMerge, NoiseModelAndAgreementThresholdMatchHandComputedValues) {
+  MergeOptions o = NoiseScaled();
+  EXPECT_NEAR(DepthNoiseSigma(1.5f, o), 0.003499f, 1e-6f);
+  EXPECT_NEAR(AgreementThreshold(1.5f, o), 0.010497f, 3e-6f);
+  EXPECT_FLOAT_EQ(AgreementThreshold(4.0f, o), 0.05f);  // capped at lambda_D
+  EXPECT_FLOAT_EQ(AgreementThreshold(0.0f, o), 0.05f);  // no measurement
+  o.noise_quantisation_per_m = 0.00285f;                // step 11.4 mm at 2 m
+  // sqrt(6.064^2 + 11.4^2 / 12) mm.
+  EXPECT_NEAR(DepthNoiseSigma(2.0f, o), 0.0068994f, 2e-6f);
+  EXPECT_FLOAT_EQ(AgreementThreshold(1.5f, SmallWindows()), 0.05f);  // off: the paper's lambda_D
+  EXPECT_EQ(AgreementThreshold(1.5f, MergeOptions{}), AgreementThreshold(1.5f, NoiseScaled()));
+}
+
+TEST(DepthMerge, NoiseScaledMeasurementFourSigmaOffALaggingVolumeIsTakenRaw) {
+  // The volume still shows an object 1.4 cm behind where it is measured now (4 sigma at 1.5 m,
+  // within lambda_D): the paper takes D_v (case 2), the noise-scaled test keeps D_c.
+  Inputs in(1.50f, 1.50f, 100);
+  in.raw.At(3, 3) = 1.514f;
+  MergedDepth out;
+  MergeDepth(in.raw, in.volume, in.grey, NoiseScaled(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 1.514f);
+  MergeDepth(in.raw, in.volume, in.grey, SmallWindows(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 1.50f);
+}
+
+TEST(DepthMerge, NoiseScaledStaticPixelWithinNoiseTakesVolume) {
+  // 0.7 cm = 2 sigma at 1.5 m: a static surface's noise, the averaged volume depth replaces it.
+  Inputs in(1.50f, 1.50f, 100);
+  in.raw.At(3, 3) = 1.507f;
+  MergedDepth out;
+  MergeDepth(in.raw, in.volume, in.grey, NoiseScaled(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 1.50f);
+  EXPECT_EQ(out.agreement.At(3, 3), AgreementThreshold(1.507f, NoiseScaled()));
+  // Far away the paper's lambda_D applies: 4 cm off at 4 m takes D_v, 6 cm off keeps D_c.
+  Inputs far(4.00f, 4.00f, 100);
+  far.raw.At(3, 3) = 4.04f;
+  far.raw.At(4, 4) = 4.06f;
+  MergeDepth(far.raw, far.volume, far.grey, NoiseScaled(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 4.00f);
+  EXPECT_FLOAT_EQ(out.merged.At(4, 4), 4.06f);
+}
+
+TEST(DepthMerge, NoiseScaledSupportRegionCountsOnlyPixelsWithinNoise) {
+  // Hole at (3, 3) in an object measured 2 cm (~6 sigma) in front of the volume everywhere: with
+  // lambda_D every neighbour is in Omega_D -> D_v(p); noise-scaled Omega_D is empty -> the median
+  // of Omega_I (the measured 1.48).
+  Inputs in(1.48f, 1.50f, 100);
+  in.raw.At(3, 3) = 0;
+  MergedDepth out;
+  MergeDepth(in.raw, in.volume, in.grey, SmallWindows(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 1.50f);
+  MergeDepth(in.raw, in.volume, in.grey, NoiseScaled(), out, nullptr);
+  EXPECT_FLOAT_EQ(out.merged.At(3, 3), 1.48f);
+}
+
+TEST(DepthMerge, RejectsBadNoiseModel) {
+  Inputs in(1, 1, 1);
+  MergedDepth out;
+  MergeOptions o;
+  o.lambda_d_sigmas = -1;
+  EXPECT_THROW(MergeDepth(in.raw, in.volume, in.grey, o, out, nullptr), ReconError);
+  o = MergeOptions{};
+  o.noise_b_per_m = -0.001f;
+  EXPECT_THROW(MergeDepth(in.raw, in.volume, in.grey, o, out, nullptr), ReconError);
+}
+
 TEST(DepthMerge, RejectsMismatchedSizes) {
   Inputs in(1, 1, 1);
   DepthImage small;
@@ -272,7 +349,7 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
       const float dc = raw.At(x, y), dv = vol.At(x, y);
-      const bool agrees = dv > 0 && std::fabs(dc - dv) <= o.lambda_d_m;
+      const bool agrees = dv > 0 && std::fabs(dc - dv) <= AgreementThreshold(dc, o);
       if (dc > 0 && !(agrees && o.volume_needs_majority)) {
         out.merged.At(x, y) = agrees ? dv : dc;
         continue;
@@ -283,7 +360,9 @@ MergedDepth Reference(const DepthImage& raw, const DepthImage& vol, const GreyIm
         const float dq = raw.At(xx, yy);
         if (dq > 0 && std::abs(grey.At(x, y) - grey.At(xx, yy)) < o.merge_lambda_i) {
           omega_i.push_back(dq);
-          if (vol.At(xx, yy) > 0 && std::fabs(dq - vol.At(xx, yy)) < o.lambda_d_m) ++omega_d;
+          if (vol.At(xx, yy) > 0 && std::fabs(dq - vol.At(xx, yy)) < AgreementThreshold(dq, o)) {
+            ++omega_d;
+          }
         }
       });
       if (dc > 0) {
@@ -338,11 +417,19 @@ TEST(DepthMerge, MatchesTheStraightforwardEquationsOnRandomInputs) {
     MergeOptions fine, fine_small = SmallWindows();
     fine.lambda_d_m = fine_small.lambda_d_m = 0.01f;
     fine.volume_needs_majority = fine_small.volume_needs_majority = true;
+    fine.lambda_d_sigmas = fine_small.lambda_d_sigmas = 0;
     MergeOptions paper_exact, paper_exact_small = SmallWindows();
     paper_exact.depth_gated_medians = paper_exact_small.depth_gated_medians = false;
     paper_exact.volume_needs_majority = paper_exact_small.volume_needs_majority = false;
-    for (MergeOptions o :
-         {MergeOptions{}, SmallWindows(), fine, fine_small, paper_exact, paper_exact_small}) {
+    paper_exact.lambda_d_sigmas = paper_exact_small.lambda_d_sigmas = 0;
+    // Noise-scaled agreement: 8 sigma is 0.98-1.20 cm over these depths, so the +1 cm volume
+    // pixels agree at some depths and not at others.
+    MergeOptions noisy, noisy_small = SmallWindows();
+    noisy.lambda_d_sigmas = noisy_small.lambda_d_sigmas = 8;
+    noisy_small.volume_needs_majority = true;
+    noisy_small.noise_quantisation_per_m = 0.00285f;
+    for (MergeOptions o : {MergeOptions{}, SmallWindows(), fine, fine_small, paper_exact,
+                           paper_exact_small, noisy, noisy_small}) {
       ThreadPool pool(2);
       MergedDepth got;
       MergeDepth(raw, vol, g, o, got, &pool);

@@ -9,7 +9,10 @@
 // Params: volume_size (2.0 m), volume_resolution (256), volume_origin ([-1, -1.2, 0.5] m, in the
 // first camera's frame), truncation (0.03 m), max_weight (64), threads (2), depth_min (0.3),
 // depth_max (4.0), merge (true), merge_k (20), lambda_i (7), lambda_d (0.05 m), smooth_k (8),
-// smooth_lambda_i (7), denoise_k (2), icp_iterations ([4, 5, 10], fine to coarse), mesh_out (""
+// smooth_lambda_i (7), denoise_k (2), lambda_d_sigmas (3: the merge's agreement threshold is
+// min(lambda_d, lambda_d_sigmas sigma(z)); 0 = the paper's lambda_d), depth_noise ([0.0012,
+// 0.0019, 0.4]: sigma(z) = a + b (z - z0)^2 m), depth_quantisation (0 per m; see
+// recon::MergeOptions), icp_iterations ([4, 5, 10], fine to coarse), mesh_out (""
 // or a .ply path written at shutdown), world_frame ("world"), normals (G_r's normals: "depth" =
 // from D''', "volume" = the TSDF gradient where D''' agrees with the volume; see
 // recon::FusionOptions::normal_source), normal_gap (0.03 m), normal_gradient_step (1 voxel). Reset:
@@ -69,6 +72,19 @@ int Run(int argc, char** argv) {
   options.merge.smooth_k = node.Param("smooth_k", 8);
   options.merge.smooth_lambda_i = static_cast<float>(node.Param("smooth_lambda_i", 7.0));
   options.merge.denoise_k = node.Param("denoise_k", 2);
+  options.merge.lambda_d_sigmas =
+      static_cast<float>(node.Param("lambda_d_sigmas", double{options.merge.lambda_d_sigmas}));
+  {
+    const std::vector<double> noise = node.Param(
+        "depth_noise", std::vector<double>{options.merge.noise_a_m, options.merge.noise_b_per_m,
+                                           options.merge.noise_z0_m});
+    if (noise.size() != 3) throw node::NodeError("fusion: param depth_noise needs 3 values");
+    options.merge.noise_a_m = static_cast<float>(noise[0]);
+    options.merge.noise_b_per_m = static_cast<float>(noise[1]);
+    options.merge.noise_z0_m = static_cast<float>(noise[2]);
+  }
+  options.merge.noise_quantisation_per_m = static_cast<float>(
+      node.Param("depth_quantisation", double{options.merge.noise_quantisation_per_m}));
   options.icp.iterations.clear();
   for (int64_t n : node.Param("icp_iterations", std::vector<int64_t>{4, 5, 10})) {
     options.icp.iterations.push_back(static_cast<int>(n));

@@ -23,9 +23,11 @@
 // Tuning knobs for experiments (environment): FUSION_EVAL_ICP=a,b,c (iterations),
 // FUSION_EVAL_TRACK_LEVEL, FUSION_EVAL_MAXDIST (m), FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC (m),
 // FUSION_EVAL_BILATERAL (radius), FUSION_EVAL_ANGLE (deg), FUSION_EVAL_MERGE_GATE /
-// FUSION_EVAL_MERGE_MAJORITY (0 = the paper's eq. 3-5 exactly), FUSION_EVAL_DEPTH_SCALE (multiplies
-// the depth), FUSION_EVAL_DEPTH_MAX (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy),
-// FUSION_EVAL_K1 (k1[,k2]: radial undistortion of the depth images, nearest neighbour).
+// FUSION_EVAL_MERGE_MAJORITY (0 = the paper's eq. 3-5 exactly), FUSION_EVAL_MERGE_SIGMAS /
+// FUSION_EVAL_MERGE_QUANT (MergeOptions::lambda_d_sigmas / noise_quantisation_per_m; 0 = the
+// paper's fixed lambda_D), FUSION_EVAL_DEPTH_SCALE (multiplies the depth), FUSION_EVAL_DEPTH_MAX
+// (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy), FUSION_EVAL_K1 (k1[,k2]: radial
+// undistortion of the depth images, nearest neighbour).
 // --min-inliers overrides the tracking-quality threshold.
 //
 // Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
@@ -95,6 +97,10 @@ void ApplyMergeKnobs(recon::MergeOptions& merge) {
     merge.depth_gated_medians = std::atoi(g);
   if (const char* m = std::getenv("FUSION_EVAL_MERGE_MAJORITY")) {
     merge.volume_needs_majority = std::atoi(m);
+  }
+  if (const char* k = std::getenv("FUSION_EVAL_MERGE_SIGMAS")) merge.lambda_d_sigmas = std::atof(k);
+  if (const char* q = std::getenv("FUSION_EVAL_MERGE_QUANT")) {
+    merge.noise_quantisation_per_m = std::atof(q);
   }
 }
 
@@ -642,6 +648,19 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
       const bool moving = box_id != 0 && ids[p] == box_id;
       const bool raw_valid = depth.data[p] > 0;
       const int signed_distance = box_id == 0 ? 0 : moving ? inside[p] : -outside[p];
+      if (raw_valid) {
+        // Where D' took the volume over a valid measurement (eq. 3, case 2).
+        const float dv = pipeline.volume_depth().data[p], d1 = pipeline.merged().merged.data[p];
+        const bool took_volume = dv > 0 && d1 == dv && dv != depth.data[p];
+        for (int region = 0; region < (moving ? 2 : 1); ++region) {
+          Acc& a = acc[std::string("took_volume") + (region == 0 ? "" : "_moving")];
+          a.reference += 1;
+          if (took_volume) {
+            a.n += 1;
+            a.err += std::fabs(dv - ref);
+          }
+        }
+      }
       for (int s = 0; s < 5; ++s) {
         const float d = sources[s]->data[p];
         // Also over the pixels where the raw depth is valid (like for like with raw).
@@ -686,6 +705,15 @@ int RunSim(const std::string& scenario_path, std::pair<int, int> range, const st
       const Acc& c = acc[name + "_where_raw"];
       fields.push_back({name + "_mean_abs_error_where_raw_valid_m", c.n > 0 ? c.err / c.n : 0});
     }
+  }
+  // Where D' replaced a valid measurement by D_v: fraction of the raw-valid pixels, and D_v's
+  // mean abs error there.
+  for (const char* region : {"", "_moving"}) {
+    const Acc& a = acc[std::string("took_volume") + region];
+    fields.push_back({std::string("merge_pass1") + region + "_took_volume_fraction",
+                      a.reference > 0 ? a.n / a.reference : 0});
+    fields.push_back({std::string("merge_pass1") + region + "_took_volume_mean_abs_error_m",
+                      a.n > 0 ? a.err / a.n : 0});
   }
   // Error against the distance to the box silhouette (raw-valid pixels, same set per source).
   std::printf("box silhouette band: pixels | mean abs error cm: raw volume D' D'' D'''\n");

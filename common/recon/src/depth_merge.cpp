@@ -126,9 +126,16 @@ inline F8 LoadF8(const float* p) {
 }
 typedef uint8_t B8 __attribute__((vector_size(8)));
 inline I8 LoadU8(const uint8_t* p) {
+#ifdef __AVX2__
+  // One 8-byte load widened by vpmovzxbd (GCC builds the generic conversion below from scalar
+  // byte extractions).
+  return reinterpret_cast<I8>(
+      _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p))));
+#else
   B8 v;
-  std::memcpy(&v, p, sizeof(v));  // one 8-byte load, widened in registers (vpmovzxbd)
+  std::memcpy(&v, p, sizeof(v));
   return __builtin_convertvector(v, I8);
+#endif
 }
 
 // A selection network for the middle slot (samples - 1) / 2 of `samples` (odd, <= 32) values,
@@ -364,16 +371,51 @@ int GateSamples(float* samples, int n, float centre, float lambda_d) {
   return m;
 }
 
+// AgreementThreshold (eq. 2 / 3 deviation) of 8 depths at once: the same float operations in
+// the same order as the scalar function, so the results are bit-identical.
+struct NoiseLanes {
+  F8 a, b, z0, q, k, ld;
+  bool quantisation;
+  explicit NoiseLanes(const MergeOptions& o)
+      : a(F8{} + o.noise_a_m),
+        b(F8{} + o.noise_b_per_m),
+        z0(F8{} + o.noise_z0_m),
+        q(F8{} + o.noise_quantisation_per_m),
+        k(F8{} + o.lambda_d_sigmas),
+        ld(F8{} + o.lambda_d_m),
+        quantisation(o.noise_quantisation_per_m > 0) {}
+  F8 Threshold(F8 z) const {
+    const F8 dz = z - z0;
+    F8 sigma = a + b * dz * dz;
+    if (quantisation) {
+      const F8 step = q * z * z;
+      const F8 variance = sigma * sigma + step * step * (F8{} + 1.0f / 12.0f);
+#ifdef __AVX__
+      sigma = _mm256_sqrt_ps(variance);
+#else
+      for (int l = 0; l < kLanes; ++l) sigma[l] = std::sqrt(variance[l]);
+#endif
+    }
+    const F8 scaled = k * sigma;
+    const F8 capped = scaled < ld ? scaled : ld;  // std::min(ld, scaled)
+    return z > F8{} ? capped : ld;
+  }
+};
+
 // D' (eq. 1-3) at pixels x0..x0+7 of row y (same conditions on x0 as MedianBatch; Samples = the
 // window's sample count). The window's medians are only computed when a lane is a hole (its
-// Omega counts also when volume_majority and a lane's D_c agrees with D_v).
-template <int Samples>
+// Omega counts also when volume_majority and a lane's D_c agrees with D_v). Noise: the agreement
+// threshold of eq. 2 / 3 is `agreement`(p) = AgreementThreshold(D_c(p)) per pixel
+// (lambda_d_sigmas > 0) instead of lambda_d.
+template <int Samples, bool Noise>
 F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& intensity,
-              float lambda_i, float lambda_d, bool volume_majority, const Window& win, int x0,
-              int y) {
+              const DepthImage* agreement, float lambda_i, float lambda_d, bool volume_majority,
+              const Window& win, int x0, int y) {
   const F8 zero = {};
-  const F8 ld = F8{} + lambda_d;
+  const F8 ld_fixed = F8{} + lambda_d;
   const F8 dc = LoadF8(&raw.At(x0, y)), dv = LoadF8(&volume.At(x0, y));
+  F8 ld = ld_fixed;
+  if constexpr (Noise) ld = LoadF8(&agreement->At(x0, y));
   const I8 dc_valid = dc > zero, dv_valid = dv > zero;
   const F8 diff = dc - dv;
   const I8 agrees = dv_valid & (diff <= ld) & (-diff <= ld);
@@ -399,13 +441,16 @@ F8 MergeBatch(const DepthImage& raw, const DepthImage& volume, const GreyImage& 
     const float* drow = &raw.At(0, yy);
     const float* vrow = &volume.At(0, yy);
     const uint8_t* irow = &intensity.At(0, yy);
+    [[maybe_unused]] const float* arow = Noise ? &agreement->At(0, yy) : nullptr;
     for (int dx = -win.half; dx <= win.half; dx += win.stride) {
       const F8 d = LoadF8(drow + x0 + dx), v = LoadF8(vrow + x0 + dx);
       I8 idiff = ip - LoadU8(irow + x0 + dx);
       idiff = idiff < 0 ? -idiff : idiff;
       const I8 in_i = (d > zero) & (__builtin_convertvector(idiff, F8) < li);  // eq. 1
       const F8 dd = d - v;
-      n_d -= in_i & (v > zero) & (dd < ld) & (-dd < ld);  // eq. 2
+      F8 lq = ld_fixed;
+      if constexpr (Noise) lq = LoadF8(arow + x0 + dx);
+      n_d -= in_i & (v > zero) & (dd < lq) & (-dd < lq);  // eq. 2
       slots[s++] = in_i ? d : inf;
       n_i -= in_i;
     }
@@ -440,9 +485,29 @@ void MergeOptions::Validate() const {
   if (merge_k < 1 || smooth_k < 1 || denoise_k < 1) {
     throw ReconError("merge: window sizes k must be >= 1");
   }
-  if (!(merge_lambda_i >= 0) || !(smooth_lambda_i >= 0) || !(lambda_d_m >= 0)) {
+  if (!(merge_lambda_i >= 0) || !(smooth_lambda_i >= 0) || !(lambda_d_m >= 0) ||
+      !(lambda_d_sigmas >= 0)) {
     throw ReconError("merge: thresholds must be >= 0");
   }
+  if (!(noise_a_m >= 0) || !(noise_b_per_m >= 0) || !std::isfinite(noise_z0_m) ||
+      !(noise_quantisation_per_m >= 0) || !(noise_a_m + noise_quantisation_per_m > 0)) {
+    throw ReconError(
+        "merge: noise model needs noise_a_m, noise_b_per_m, noise_quantisation_per_m >= 0 and "
+        "noise_a_m or noise_quantisation_per_m > 0");
+  }
+}
+
+float DepthNoiseSigma(float z, const MergeOptions& options) {
+  const float dz = z - options.noise_z0_m;
+  const float axial = options.noise_a_m + options.noise_b_per_m * dz * dz;  // Nguyen et al. 2012
+  if (!(options.noise_quantisation_per_m > 0)) return axial;
+  const float step = options.noise_quantisation_per_m * z * z;
+  return std::sqrt(axial * axial + step * step * (1.0f / 12.0f));
+}
+
+float AgreementThreshold(float z, const MergeOptions& options) {
+  if (!(options.lambda_d_sigmas > 0) || !(z > 0)) return options.lambda_d_m;
+  return std::min(options.lambda_d_m, options.lambda_d_sigmas * DepthNoiseSigma(z, options));
 }
 
 void GreyFromRgb(const uint8_t* rgb, int width, int height, size_t stride, GreyImage& out) {
@@ -474,6 +539,28 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
   out.denoised.Resize(w, h);
   const float ld = options.lambda_d_m;
 
+  // The noise-scaled agreement threshold of eq. 2 / 3 per pixel (deviation, lambda_d_sigmas > 0),
+  // 8 pixels at a time.
+  const bool noise_scaled = options.lambda_d_sigmas > 0;
+  const DepthImage* agreement = nullptr;
+  if (noise_scaled) {
+    const NoiseLanes noise(options);
+    out.agreement.Resize(w, h);
+    ForRows(pool, h, [&](int y) {
+      const float* z = &raw.At(0, y);
+      float* a = &out.agreement.At(0, y);
+      int x = 0;
+      for (; x + kLanes <= w; x += kLanes) {
+        const F8 t = noise.Threshold(LoadF8(z + x));
+        std::memcpy(a + x, &t, sizeof(t));
+      }
+      for (; x < w; ++x) a[x] = AgreementThreshold(z[x], options);
+    });
+    agreement = &out.agreement;
+  } else {
+    out.agreement.Resize(0, 0);
+  }
+
   // D' (eq. 1-3).
   {
     const Window win = WindowFor(options.merge_k);
@@ -486,12 +573,18 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
         if (x % kLanes == 0 && x - win.half >= 0 && x + kLanes - 1 + win.half < w) {
           // 8 interior pixels at once (bit-identical to the scalar equations below).
           F8 r;
+          const auto batch = [&]<int Samples>() {
+            return noise_scaled ? MergeBatch<Samples, true>(raw, volume, intensity, agreement, li,
+                                                            ld, majority, win, x, y)
+                                : MergeBatch<Samples, false>(raw, volume, intensity, nullptr, li,
+                                                             ld, majority, win, x, y);
+          };
           if (per_side == 5) {
-            r = MergeBatch<25>(raw, volume, intensity, li, ld, majority, win, x, y);
+            r = batch.template operator()<25>();
           } else if (per_side == 3) {
-            r = MergeBatch<9>(raw, volume, intensity, li, ld, majority, win, x, y);
+            r = batch.template operator()<9>();
           } else {
-            r = MergeBatch<1>(raw, volume, intensity, li, ld, majority, win, x, y);
+            r = batch.template operator()<1>();
           }
           std::memcpy(&out.merged.At(x, y), &r, sizeof(r));
           x += kLanes - 1;
@@ -499,7 +592,8 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
         }
         const float dc = raw.At(x, y), dv = volume.At(x, y);
         float result;
-        const bool agrees = dv > 0 && std::fabs(dc - dv) <= ld;
+        const float ldp = noise_scaled ? agreement->At(x, y) : ld;
+        const bool agrees = dv > 0 && std::fabs(dc - dv) <= ldp;
         if (dc > 0 && !(agrees && majority)) {
           result = agrees ? dv : dc;
         } else {
@@ -516,7 +610,8 @@ void MergeDepth(const DepthImage& raw, const DepthImage& volume, const GreyImage
               if (!(std::abs(ip - intensity.At(xx, yy)) < li)) continue;  // eq. 1
               samples[n_i++] = dq;
               const float vq = volume.At(xx, yy);
-              if (vq > 0 && std::fabs(dq - vq) < ld) ++n_d;  // eq. 2
+              const float lq = noise_scaled ? agreement->At(xx, yy) : ld;
+              if (vq > 0 && std::fabs(dq - vq) < lq) ++n_d;  // eq. 2
             }
           }
           if (dc > 0) {

@@ -33,30 +33,62 @@ struct MergeOptions {
   // object that moves less than lambda_D per frame replaces less of its measured depth. Costs a
   // D' window on every pixel (docs/recon.md: +2.5-3 ms CPU for a small gain).
   bool volume_needs_majority = false;
+  // Deviation from the paper (0 = eq. 2 / 3 with the fixed lambda_D exactly): the agreement
+  // threshold of eq. 2 and 3 at a pixel with measured depth z = D_c becomes
+  //   lambda(z) = min(lambda_D, lambda_d_sigmas * sigma(z))          (see AgreementThreshold)
+  // with sigma(z) the sensor's depth noise (below), so that a measurement more than
+  // lambda_d_sigmas standard deviations from the volume is taken as measured: the volume there
+  // lags a moving object (or is wrong), since a static surface's measurement scatters around the
+  // volume's average by sigma. Near the camera sigma is millimetres (Kinect v1: 3.5 mm at 1.5 m)
+  // while lambda_D = 5 cm; far away (sigma >= lambda_D / lambda_d_sigmas) the paper's lambda_D
+  // applies. Default 3 (a static surface's measurement lies within 3 sigma of its true depth
+  // 99.7 % of the time); docs/recon.md has the figures for 0 (the paper), 1-4.
+  float lambda_d_sigmas = 3;
+  // The sensor's axial depth noise, standard deviation in metres at depth z (metres):
+  //   sigma(z) = sqrt(s(z)^2 + (q z^2)^2 / 12),  s(z) = a + b (z - z0)^2
+  // (a = noise_a_m, b = noise_b_per_m, z0 = noise_z0_m, q = noise_quantisation_per_m).
+  // s(z): the Kinect v1 axial noise model of Nguyen, Izadi and Lovell 2012 ("Modeling Kinect
+  // sensor noise for improved 3D reconstruction and tracking", 3DIMPVT; fitted for surface angles
+  // of 10-60 degrees: 0.0012 + 0.0019 (z - 0.4)^2 m); q z^2: the depth step of disparity
+  // quantisation (Kinect v1 q ~ 0.00285 / m), a uniform error of variance step^2 / 12 (0 = not
+  // modelled).
+  float noise_a_m = 0.0012f;
+  float noise_b_per_m = 0.0019f;
+  float noise_z0_m = 0.4f;
+  float noise_quantisation_per_m = 0;
 
-  // Throws ReconError for k < 1 or a negative threshold.
+  // Throws ReconError for k < 1 or a negative threshold or noise coefficient.
   void Validate() const;
 };
+
+// sigma(z) of MergeOptions (metres; z in metres, > 0).
+float DepthNoiseSigma(float z, const MergeOptions& options);
+// The depth agreement threshold of eq. 2 / 3 (metres) at measured depth z (metres):
+// min(lambda_D, lambda_d_sigmas * DepthNoiseSigma(z)) when lambda_d_sigmas > 0 and z > 0, else
+// lambda_D (the paper).
+float AgreementThreshold(float z, const MergeOptions& options);
 
 // The three passes' outputs (metres, 0 = missing), all the size of the inputs.
 struct MergedDepth {
   DepthImage merged;    // D', eq. 3
   DepthImage smoothed;  // D'', eq. 4
   DepthImage denoised;  // D''', eq. 5 (the depth of G_r)
+  // AgreementThreshold(D_c(p)) per pixel (metres) when lambda_d_sigmas > 0, else empty.
+  DepthImage agreement;
 };
 
 // Runs eq. 1-5. `raw` = D_c, `volume` = D_v (same camera, same size), `intensity` = I_c
 // registered to the depth. Throws ReconError if the sizes differ or an input is empty.
-// Per pixel p of D' (eq. 3):
-//   D_c(p) valid, D_v(p) valid, |D_c - D_v| >  lambda_D -> D_c(p)
-//   D_c(p) valid, D_v(p) valid, |D_c - D_v| <= lambda_D -> D_v(p) (with volume_needs_majority
+// Per pixel p of D' (eq. 3), with lambda(p) = AgreementThreshold(D_c(p)) (lambda_D in the paper):
+//   D_c(p) valid, D_v(p) valid, |D_c - D_v| >  lambda(p) -> D_c(p)
+//   D_c(p) valid, D_v(p) valid, |D_c - D_v| <= lambda(p) -> D_v(p) (with volume_needs_majority
 //     only if |Omega_D| >= |Omega_I| / 2, else D_c(p))
 //   D_c(p) valid, D_v(p) missing                        -> D_c(p)
 //   D_c(p) missing, |Omega_D| >= |Omega_I| / 2 > 0 and D_v(p) valid -> D_v(p)
 //   D_c(p) missing otherwise -> median{D_c(q) : q in Omega_I(p)} (0 if Omega_I is empty)
 // with Omega_k(p) the valid D_c pixels of the window, Omega_I (eq. 1) those with
 // |I(p) - I(q)| < lambda_I and Omega_D (eq. 2) those of Omega_I with a valid D_v and
-// |D_c(q) - D_v(q)| < lambda_D.
+// |D_c(q) - D_v(q)| < lambda(q). (The depth gate of the medians below uses lambda_D itself.)
 // D''(p) (eq. 4) = median{D'(q) : q in Omega_I(p)} (window smooth_k, lambda_I smooth_lambda_i, on
 // every pixel, 0 if empty); D'''(p) (eq. 5) = median of the valid D''(q) in the denoise_k window.
 // With depth_gated_medians, where D_c(p) is valid and the centre value c = D'(p) (D''(p) for
