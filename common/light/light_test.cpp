@@ -13,6 +13,7 @@
 
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
+#include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/sh/sh.h"
 
@@ -552,6 +553,260 @@ TEST(Estimate, ShRotationMatrixRotatesADirectionalLight) {
 // One frame of a synthetic stream: the GroupedScene surfaces (one grey material, normals facing
 // the camera) lit by a directional light `direction` (camera frame; power 0 = off) plus ambient,
 // intensities with Gaussian noise of `noise` (seeded).
+// A sphere of radius `radius` centred 3 m ahead (on the optical axis) in front of a wall at 4 m,
+// seen by the 160x120 camera of Scene: depth and exact normals.
+Scene SphereScene(double radius) {
+  Scene s(Shape::kPlane);
+  for (int v = 0; v < s.h; ++v) {
+    for (int u = 0; u < s.w; ++u) {
+      const double dx = (u - s.k.cx) / s.k.fx, dy = (v - s.k.cy) / s.k.fy;
+      const double len = std::sqrt(dx * dx + dy * dy + 1);
+      const double d[3] = {dx / len, dy / len, 1 / len};
+      // |t d - c|^2 = r^2, c = (0, 0, 3).
+      const double b = d[2] * 3, disc = b * b - (9 - radius * radius);
+      double z = 4, n[3] = {0, 0, -1};
+      if (disc > 0) {
+        const double t = b - std::sqrt(disc);
+        const double p[3] = {t * d[0], t * d[1], t * d[2]};
+        z = p[2];
+        n[0] = p[0] / radius, n[1] = p[1] / radius, n[2] = (p[2] - 3) / radius;
+      }
+      const size_t q = static_cast<size_t>(v) * s.w + u;
+      s.depth[q] = static_cast<float>(z);
+      for (int c = 0; c < 3; ++c) s.normals[3 * q + c] = static_cast<float>(n[c]);
+    }
+  }
+  return s;
+}
+
+double AngleDeg(const std::vector<float>& a, const std::vector<float>& b, size_t p) {
+  const double dot =
+      a[3 * p] * b[3 * p] + a[3 * p + 1] * b[3 * p + 1] + a[3 * p + 2] * b[3 * p + 2];
+  return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+// The test camera is coarse (a pixel is 2.5 cm at 3 m): curvature radii below ~0.2 m are below
+// its resolution, so the smooth-surface allowance is set to that (the default 2 cm suits 640 x 480
+// at 525 px focal length: 4.8 mm pixels at 2.5 m).
+constexpr float kTestMinRadius = 0.2f;
+
+TEST(Reliability, LowAtDepthEdgesAndCreasesHighOnPlanesAndSpheres) {
+  light::NormalReliabilityOptions o;
+  o.window = 2;
+  o.min_radius_m = kTestMinRadius;
+  std::vector<float> r;
+  // Wall over floor: the crease (row ~79.5) is unreliable, wall and near floor are not.
+  const Scene floor(Shape::kFloor);
+  light::NormalReliability(floor.depth, floor.w, floor.h, floor.k, floor.normals, o, &r);
+  auto at = [&](int u, int v) { return r[static_cast<size_t>(v) * floor.w + u]; };
+  EXPECT_GT(at(80, 40), 0.9f);   // wall
+  EXPECT_GT(at(80, 110), 0.9f);  // floor 1.2 m ahead
+  EXPECT_LT(at(80, 80), 0.1f);   // the crease
+  EXPECT_LT(at(80, 79), 0.1f);
+  // A concave V: its crease (u ~ 79.5) too.
+  const Scene valley(Shape::kValley);
+  light::NormalReliability(valley.depth, valley.w, valley.h, valley.k, valley.normals, o, &r);
+  EXPECT_LT(at(80, 60), 0.1f);
+  EXPECT_GT(at(40, 60), 0.9f);
+  EXPECT_GT(at(120, 60), 0.9f);
+  // A 0.6 m sphere 3 m ahead of a wall at 4 m: reliable on the sphere and the wall, not at the
+  // silhouette (radius 0.6 / 3 * 120 = 24 px, at u = 79.5 + 24.5).
+  const Scene sphere = SphereScene(0.6);
+  light::NormalReliability(sphere.depth, sphere.w, sphere.h, sphere.k, sphere.normals, o, &r);
+  EXPECT_GT(at(80, 60), 0.9f);   // sphere centre
+  EXPECT_GT(at(95, 60), 0.9f);   // sphere, 38 degrees off the view axis
+  EXPECT_GT(at(140, 60), 0.9f);  // wall
+  int edge_low = 0;
+  for (int u = 100; u <= 108; ++u) edge_low += at(u, 60) < 0.1f;
+  EXPECT_GE(edge_low, 3);  // the silhouette and its window
+  EXPECT_EQ(ErrorOf([&] {
+              light::NormalReliability(sphere.depth, sphere.w, sphere.h - 1, sphere.k,
+                                       sphere.normals, o, &r);
+            }),
+            "light::NormalReliability: depth has 19200 values and normals 57600, expected "
+            "160x119 (x3)");
+}
+
+TEST(Reliability, EdgeAwareNormalsComeFromThePixelsOwnSurface) {
+  // Next to a crease and a silhouette, central differences mix the two surfaces; the edge-aware
+  // normals take the side that continues the pixel's surface and are exact there.
+  light::DepthNormalOptions o;
+  o.step = 2;
+  o.min_radius_m = kTestMinRadius;
+  std::vector<float> edge, central, r;
+  const Scene floor(Shape::kFloor);
+  light::NormalsWithReliability(floor.depth, floor.w, floor.h, floor.k, o, &edge, &r);
+  light::NormalsFromDepth(floor.depth, floor.w, floor.h, floor.k, &central, 0.05f, 2);
+  double worst_edge = 0, worst_central = 0;
+  for (int v = 76; v <= 83; ++v) {  // the rows around the crease (79.5)
+    const size_t p = static_cast<size_t>(v) * floor.w + 80;
+    worst_edge = std::max(worst_edge, AngleDeg(edge, floor.normals, p));
+    worst_central = std::max(worst_central, AngleDeg(central, floor.normals, p));
+  }
+  std::printf("crease: worst normal error %.2f deg edge-aware, %.2f deg central\n", worst_edge,
+              worst_central);
+  EXPECT_LT(worst_edge, 1.0);
+  EXPECT_GT(worst_central, 10.0);
+  const Scene sphere = SphereScene(0.6);
+  light::NormalsWithReliability(sphere.depth, sphere.w, sphere.h, sphere.k, o, &edge, &r);
+  // The wall right outside the silhouette (the sphere's depth is within 5 % * step of the wall's
+  // only near the rim, so compare a wide band) and the sphere's interior.
+  double worst_wall = 0, worst_sphere = 0;
+  for (int u = 105; u <= 112; ++u) {
+    worst_wall = std::max(worst_wall, AngleDeg(edge, sphere.normals, 60 * sphere.w + u));
+  }
+  for (int u = 60; u <= 98; ++u) {
+    worst_sphere = std::max(worst_sphere, AngleDeg(edge, sphere.normals, 60 * sphere.w + u));
+    EXPECT_GT(r[60 * sphere.w + u], 0.5f) << u;
+  }
+  EXPECT_LT(worst_wall, 1.0);
+  EXPECT_LT(worst_sphere, 5.0);
+  EXPECT_GT(r[60 * sphere.w + 140], 0.99f);  // plane
+  // A one-pixel spike 10 cm in front of the wall: no side continues it, reliability ~0.
+  Scene spike(Shape::kPlane);
+  spike.depth[60 * spike.w + 80] = 2.9f;
+  light::NormalsWithReliability(spike.depth, spike.w, spike.h, spike.k, o, &edge, &r);
+  EXPECT_LT(r[60 * spike.w + 80], 0.01f);
+  EXPECT_GT(r[60 * spike.w + 90], 0.99f);
+  EXPECT_EQ(ErrorOf([&] {
+              light::NormalsWithReliability(spike.depth, spike.w, spike.h - 1, spike.k, o, &edge,
+                                            &r);
+            }),
+            "light::NormalsWithReliability: depth has 19200 values, expected 160x119");
+}
+
+TEST(Reliability, DepthNoiseTellsCleanFromQuantisedDepth) {
+  // The wall at 3 m rounded to millimetres (a clean depth16 image) and quantised like a
+  // Kinect-like disparity (steps of 0.00285 z^2, i.e. 2.6 cm at 3 m) with a slight slant so the
+  // steps show: DepthGeometry's fine / smoothed regimes are told apart by the measured k.
+  Scene clean(Shape::kPlane), coarse(Shape::kPlane);
+  for (int v = 0; v < clean.h; ++v) {
+    for (int u = 0; u < clean.w; ++u) {
+      const size_t p = static_cast<size_t>(v) * clean.w + u;
+      const double z = 3.0 / (1 - 0.3 * (u - clean.k.cx) / clean.k.fx);  // a slanted plane
+      clean.depth[p] = static_cast<float>(std::round(z * 1000) / 1000);
+      const double q = 0.00285 * z * z;
+      coarse.depth[p] = static_cast<float>(std::round(z / q) * q);
+    }
+  }
+  const float k_clean = light::DepthNoiseQuadratic(clean.depth, clean.w, clean.h);
+  const float k_coarse = light::DepthNoiseQuadratic(coarse.depth, coarse.w, coarse.h);
+  std::printf("measured noise k: mm depth %.2e, quantised %.2e\n", k_clean, k_coarse);
+  const light::DepthGeometryOptions defaults;
+  EXPECT_GT(k_clean, 0.0f);
+  EXPECT_LT(k_clean, defaults.fine_noise_quadratic);
+  EXPECT_GT(k_coarse, defaults.fine_noise_quadratic);
+}
+
+// A room-like frame: unoccluded transfer rows of three planes (floor, back and left wall: 3000,
+// 3000 and 1500 rows) and of a ball (300 normals over the visible hemisphere) under the light of
+// MakeGroupedScene (albedo 0.6). `corrupt_share` of the plane rows (fixed seed) get the transfer of
+// their normal tilted by 57 degrees in a random direction while their intensity stays the plane's:
+// the mixed normals of depth-image pixels whose stencil straddles a crease or a depth edge. Their
+// reliability is 0.02, all others 1.
+struct CorruptedFrame {
+  light::TransferResult transfer;
+  std::vector<float> intensity, reliability;
+  sh::Vec3 direction;
+  int corrupted = 0;
+};
+CorruptedFrame MakeCorruptedFrame(double corrupt_share, uint64_t seed) {
+  CorruptedFrame f;
+  f.direction = {0.45, -0.6, -0.66};
+  const double dl = std::sqrt(0.45 * 0.45 + 0.6 * 0.6 + 0.66 * 0.66);
+  for (auto& c : f.direction) c /= dl;
+  auto l = sh::DirectionalLight(f.direction, 3.0, 4);
+  l[0] += 0.3;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::vector<sh::Vec3> normals;
+  std::vector<bool> plane;
+  const sh::Vec3 planes[3] = {{0, -1, 0}, {0, 0, -1}, {1, 0, 0}};
+  const int counts[3] = {3000, 3000, 1500};
+  for (int k = 0; k < 3; ++k) {
+    for (int i = 0; i < counts[k]; ++i) normals.push_back(planes[k]), plane.push_back(true);
+  }
+  for (const auto& n : sh::FibonacciSphere(600)) {
+    if (n[2] < -0.05) normals.push_back(n), plane.push_back(false);
+  }
+  const int w = static_cast<int>(normals.size()), cc = 16;
+  f.transfer.width = w;
+  f.transfer.height = 1;
+  f.transfer.coefficient_count = cc;
+  f.transfer.valid.assign(w, 1);
+  f.reliability.assign(w, 1.0f);
+  auto row_of = [&](const sh::Vec3& n, float* out) {
+    const auto y = sh::Basis(4, n);
+    double shading = 0;
+    for (int k = 0; k < cc; ++k) {
+      out[k] = static_cast<float>(sh::ClampedCosineCoefficient(sh::DegreeOf(k)) / std::numbers::pi *
+                                  y[k]);
+      shading += out[k] * l[k];
+    }
+    return shading;
+  };
+  f.transfer.transfer.resize(static_cast<size_t>(w) * cc);
+  for (int i = 0; i < w; ++i) {
+    float* row = &f.transfer.transfer[static_cast<size_t>(i) * cc];
+    f.intensity.push_back(static_cast<float>(0.6 * row_of(normals[i], row)));
+    if (plane[i] && uniform(rng) < corrupt_share) {
+      // The plane normal tilted by 1 rad (57 degrees) towards a random direction.
+      const sh::Vec3 n = normals[i];
+      sh::Vec3 a{uniform(rng) - 0.5, uniform(rng) - 0.5, uniform(rng) - 0.5};
+      const double d = a[0] * n[0] + a[1] * n[1] + a[2] * n[2];
+      for (int c = 0; c < 3; ++c) a[c] -= d * n[c];
+      const double la = std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+      sh::Vec3 m;
+      for (int c = 0; c < 3; ++c) m[c] = n[c] * std::cos(1.0) + a[c] / la * std::sin(1.0);
+      row_of(m, row);
+      f.reliability[i] = 0.02f;
+      ++f.corrupted;
+    }
+  }
+  return f;
+}
+
+TEST(Estimate, ReliabilityWeightsIgnoreCorruptedNormals) {
+  // Orientation balancing gives the orientations the corrupted rows land in (empty otherwise but
+  // for the ball's few rows) a full bin's weight: measured 11.7 degrees off (0.4 clean); with
+  // their reliability the estimate ignores them (0.1).
+  const CorruptedFrame f = MakeCorruptedFrame(0.04, 17);
+  const int w = f.transfer.width;
+  light::EstimateOptions o;
+  o.stride = 1;
+  const auto plain = light::EstimateLight(f.transfer, f.intensity, o);
+  const auto weighted = light::EstimateLight(f.transfer, f.intensity, o, {}, f.reliability);
+  const std::vector<float> ones(w, 1.0f);
+  const auto neutral = light::EstimateLight(f.transfer, f.intensity, o, {}, ones);
+  const CorruptedFrame clean = MakeCorruptedFrame(0.0, 17);
+  const auto reference = light::EstimateLight(clean.transfer, clean.intensity, o);
+  ASSERT_TRUE(plain.valid);
+  ASSERT_TRUE(weighted.valid);
+  const double e_plain = DirectionErrorDeg(plain, f.direction);
+  const double e_weighted = DirectionErrorDeg(weighted, f.direction);
+  const double e_clean = DirectionErrorDeg(reference, f.direction);
+  std::printf("%d of %d normals corrupted: %.2f deg unweighted, %.2f deg weighted (%.2f clean)\n",
+              f.corrupted, w, e_plain, e_weighted, e_clean);
+  EXPECT_GT(f.corrupted, w / 40);
+  EXPECT_LT(f.corrupted, w / 20);
+  EXPECT_GT(e_plain, 8.0);
+  EXPECT_LT(e_weighted, e_clean + 1.0);
+  EXPECT_LT(e_weighted, 2.0);
+  // Weights of 1 change nothing.
+  EXPECT_EQ(neutral.coefficients, plain.coefficients);
+  // Sizes are checked.
+  EXPECT_EQ(ErrorOf([&] {
+              light::EstimateLight(f.transfer, f.intensity, o, {}, std::vector<float>(w - 1, 1.0f));
+            }),
+            "light::EstimateLight: reliability has " + std::to_string(w - 1) +
+                " values, transfer is " + std::to_string(w) + "x1");
+  EXPECT_EQ(ErrorOf([&] {
+              light::SolveLight(std::vector<float>(32, 0.0f), std::vector<float>(2, 0.0f), 16, o,
+                                std::vector<float>(3, 1.0f));
+            }),
+            "light::SolveLight: 3 row weights for 2 targets");
+}
+
 GroupedScene MakeNoisyFrame(const sh::Vec3& direction, double power, double noise, uint64_t seed) {
   GroupedScene g = MakeGroupedScene(0.6, 0.6);
   auto l = sh::DirectionalLight(direction, power, 4);

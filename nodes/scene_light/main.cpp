@@ -4,8 +4,9 @@
 // Inputs (relative names, remap them in launch files):
 //   mode gbuffer (default): `scene/gbuffer` (msgs::GeometryBuffer, G_r from fusion) triggers a
 //       frame; depth and normals come from it.
-//   mode depth: `camera/depth` (msgs::Image depth16 or float32) triggers a frame; the depth is
-//       smoothed and normals are computed from it (no reconstruction needed).
+//   mode depth: `camera/depth` (msgs::Image depth16 or float32) triggers a frame; normals are
+//       computed from the depth (light::DepthGeometry: edge-aware on clean depth, smoothed
+//       central differences on noisy depth; no reconstruction needed).
 //   Both: `camera/camera_info` (msgs::CameraInfo, latest) and `camera/image` (msgs::Image rgb8 /
 //       bgr8 / mono8, latest; I_c of the estimation; a debug line if its sequence differs).
 // Outputs: `scene/light` (msgs::ShLight, white light in the camera frame, bands = param bands,
@@ -25,9 +26,14 @@
 //   (1 = off; light::TemporalLightEstimator over that many frames, camera rotation not
 //   compensated), forgetting (0.5), temporal_reset_ratio (1.3), light_model ("auto" = the point
 //   model when its selection rule prefers it, else §5.2's; "distant" = §5.2; "point" = near-field
-//   point lamps; light::EstimateSceneLight; temporal_frames > 1 implies distant and rejects an
-//   explicit point / auto), lamps (1; 2 = up to two lamps), publish_indirect (false).
-//   The lamp positions are not in msgs::ShLight: they go to the debug log.
+//   point lamps; light::EstimateSceneLight; temporal_frames > 1 or reliability_weights imply
+//   distant and reject an explicit point / auto), lamps (1; 2 = up to two lamps),
+//   publish_indirect (false); depth mode: depth_normals ("auto": "edge" for a clean depth image,
+//   "central" for a noisy one, by light::DepthNoiseQuadratic; "edge":
+//   light::NormalsWithReliability; "central": SmoothDepth w / 80 + NormalsFromDepth), smooth_radius
+//   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
+//   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r). The
+//   lamp positions are not in msgs::ShLight: they go to the debug log.
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -40,6 +46,7 @@
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
 #include "probeless/light/point_light.h"
+#include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
@@ -79,6 +86,19 @@ int Run(int argc, char** argv) {
                            gbuffer_normals + "'");
   }
   const bool normal_filter = node.Param("normal_filter", false);
+  light::DepthGeometryOptions dgo;
+  const std::string depth_normals = node.Param("depth_normals", "auto");
+  if (depth_normals != "auto" && depth_normals != "edge" && depth_normals != "central") {
+    throw node::UsageError("scene_light: depth_normals must be auto, edge or central, got '" +
+                           depth_normals + "'");
+  }
+  dgo.normals_from = depth_normals == "auto"   ? light::DepthNormals::kAuto
+                     : depth_normals == "edge" ? light::DepthNormals::kEdge
+                                               : light::DepthNormals::kCentral;
+  dgo.smooth_radius = node.Param("smooth_radius", -1);
+  dgo.step = node.Param("normal_step", -1);
+  if (dgo.step == 0) throw node::UsageError("scene_light: normal_step must be -1 or >= 1, got 0");
+  const bool reliability_weights = node.Param("reliability_weights", false);
   light::TemporalOptions tmo;
   tmo.frames = node.Param("temporal_frames", 1);
   tmo.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
@@ -100,6 +120,13 @@ int Run(int argc, char** argv) {
     }
     so.model = light::LightModel::kDistant;
   }
+  if (so.model != light::LightModel::kDistant && reliability_weights) {
+    // The row weights are the distant fit's (EstimateLight): the default auto gives way to it.
+    if (node.HasParamOverride("light_model")) {
+      throw node::UsageError("scene_light: reliability_weights needs light_model distant");
+    }
+    so.model = light::LightModel::kDistant;
+  }
   light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
   light::TransferComputer computer(to);         // throws LightError for bad options
 
@@ -115,7 +142,7 @@ int Run(int argc, char** argv) {
 
   std::optional<msgs::CameraInfo> info;
   std::optional<bus::Sample> image;  // the latest image sample (held)
-  std::vector<float> grey, depth, normals;
+  std::vector<float> grey, depth, normals, reliability;
   std::vector<uint8_t> rgb;  // the image's sRGB bytes for the albedo groups
   light::TransferResult result;
   int64_t frames = 0, published = 0;
@@ -154,7 +181,8 @@ int Run(int argc, char** argv) {
         return;
       }
       header = d->header;
-      light::GeometryFromDepthImage(*d, d.payload, *info, &depth, &normals);
+      light::GeometryFromDepthImage(*d, d.payload, *info, &depth, &normals, dgo,
+                                    reliability_weights ? &reliability : nullptr);
       view = {static_cast<int>(d->width),
               static_cast<int>(d->height),
               light::IntrinsicsFrom(*info, d->width, d->height),
@@ -166,6 +194,15 @@ int Run(int argc, char** argv) {
       // view.normals is `normals` here (the depth mode, or copied above).
       light::FilterNormals(view.depth, view.width, view.height, view.intrinsics, {}, normals);
     }
+    if (reliability_weights && mode == "gbuffer") {
+      // G_r is denoised by the merge: the smoothed-depth noise model.
+      light::NormalReliabilityOptions ro;
+      ro.noise_quadratic = dgo.smoothed_noise_quadratic;
+      light::NormalReliability(view.depth, view.width, view.height, view.intrinsics, view.normals,
+                               ro, &reliability);
+    }
+    const std::span<const float> weights =
+        reliability_weights ? std::span<const float>(reliability) : std::span<const float>();
     const auto img = msgs::ReadMessage<msgs::Image>(image->data());
     if (img->header.sequence != header.sequence) {
       node.Debug() << "image sequence " << img->header.sequence << " used for frame "
@@ -176,9 +213,9 @@ int Run(int argc, char** argv) {
     computer.Compute(view, {}, indirect ? &*dominant : nullptr, &result);
     light::LightEstimate e;
     if (tmo.frames > 1) {
-      e = temporal.Estimate(result, grey, eo, rgb);
+      e = temporal.Estimate(result, grey, eo, rgb, nullptr, weights);
     } else if (so.model == light::LightModel::kDistant) {
-      e = light::EstimateLight(result, grey, eo, rgb);
+      e = light::EstimateLight(result, grey, eo, rgb, weights);
     } else {
       light::SceneLightResult r = light::EstimateSceneLight(view, result, grey, so, rgb);
       e = std::move(r.light);

@@ -47,6 +47,12 @@
 // EstimateSceneLight minus EstimateLight) and `lamp_position_error_m_median` (the chosen model's
 // strongest lamp to the nearest enabled true lamp, --sim; point frames only); --plots adds
 // scene_light_lamps.png.
+// The sensor path's normals are the node's depth mode's (light::DepthGeometry,
+// kAuto); --legacy-normals / --edge-normals force round 2's / the edge-aware ones
+// (--edge-noise-quad,
+// --edge-threshold, --edge-radius, --edge-view: light::DepthNormalOptions); --reliability uses
+// the normals' reliability as the estimator's row weights. A noise-free-depth run: a scenario
+// without its `sensor:` block (the "sensor" path then sees millimetre depth16 without noise).
 #include "probeless/node/main.h"
 
 #include <time.h>
@@ -70,6 +76,7 @@
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
 #include "probeless/light/point_light.h"
+#include "probeless/light/reliability.h"
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
@@ -104,8 +111,8 @@ struct Options {
   // --filter-radius R, --filter-angle DEG, --filter-view DEG, --filter-jump REL.
   bool normal_filter = false;
   light::NormalFilterOptions filter;
-  int smooth_radius = -1;  // --smooth-radius R: sensor depth smoothing (-1: GeometryFromSimFrame's)
-  int normal_step = -1;    // --normal-step S: NormalsFromDepth step (-1: GeometryFromSimFrame's)
+  int smooth_radius = -1;     // --smooth-radius R: sensor depth smoothing (-1: DepthGeometry's)
+  int normal_step = -1;       // --normal-step S: normal step (-1: DepthGeometry's)
   bool fused_volume = false;  // --fused-volume: G_v (the TSDF raycast, depth and normals) not G_r
   int fused_normal_step = 0;  // --fused-normal-step S: normals from G_r's depth (0: fusion's)
   // Fusion configuration (defaults: launch/demo_scene.yaml's fusion node): --fused-size M,
@@ -128,6 +135,16 @@ struct Options {
   bool light_model_set = false;                              // --light-model given
   int lamps = 1;                                             // --lamps K
   int point_rows = 0;  // --point-rows N: PointLightOptions::max_rows (0 = its default)
+  // Depth-mode geometry of the sensor path (light::DepthGeometry, default kAuto: edge-aware on
+  // clean depth, round 2's normals on noisy depth): --legacy-normals (always round 2's SmoothDepth
+  // w/80 + NormalsFromDepth), --edge-normals (always edge-aware, at the scale of the measured
+  // noise), --smooth-radius R / --normal-step S (override the scale), --edge-noise-quad Q,
+  // --edge-threshold T, --edge-radius M, --edge-view DEG (light::DepthNormalOptions).
+  light::DepthGeometryOptions depth_geometry;
+  // --reliability: the normals' reliability as the estimator's row weights (sensor:
+  // DepthGeometry's; fused: light::NormalReliability of G_r, or NormalsWithReliability's with
+  // --fused-normal-step).
+  bool reliability = false;
 };
 
 // One evaluated frame of one variant.
@@ -273,7 +290,8 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
                 const msgs::ShLight& truth, double time_s,
                 const msgs::ShLight* camera_truth = nullptr,
                 light::TemporalLightEstimator* temporal = nullptr, const float* rotation = nullptr,
-                const std::vector<std::array<float, 3>>* true_lamps = nullptr) {
+                const std::vector<std::array<float, 3>>* true_lamps = nullptr,
+                std::span<const float> reliability = {}) {
   Sample s;
   s.time_s = time_s;
   light::TransferResult& t = v.result;
@@ -285,9 +303,9 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
   const double c1 = ThreadCpuMs();
   light::LightEstimate e;
   if (temporal != nullptr) {
-    e = temporal->Estimate(t, grey, v.estimate, colour, rotation);
+    e = temporal->Estimate(t, grey, v.estimate, colour, rotation, reliability);
   } else if (v.scene.model == light::LightModel::kDistant) {
-    e = light::EstimateLight(t, grey, v.estimate, colour);
+    e = light::EstimateLight(t, grey, v.estimate, colour, reliability);
   } else {
     light::EstimateLight(t, grey, v.estimate, colour);  // timed alone for cpu_ms_point
     const double c_distant = ThreadCpuMs() - c1;
@@ -581,6 +599,24 @@ int Run(int argc, char** argv) {
       o.lamps = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--point-rows")
       o.point_rows = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--legacy-normals")
+      o.depth_geometry.normals_from = light::DepthNormals::kCentral;
+    else if (a == "--edge-normals")
+      o.depth_geometry.normals_from = light::DepthNormals::kEdge;
+    else if (a == "--edge-noise-quad")
+      o.depth_geometry.normals.noise_quadratic =
+          static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--edge-threshold")
+      o.depth_geometry.normals.threshold_sigma =
+          static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--edge-radius")
+      o.depth_geometry.normals.min_radius_m =
+          static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--edge-view")
+      o.depth_geometry.normals.max_view_angle_deg =
+          static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--reliability")
+      o.reliability = true;
     else if (a == "--fused-size")
       o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-resolution")
@@ -617,6 +653,10 @@ int Run(int argc, char** argv) {
     if (o.light_model_set) throw node::UsageError("--temporal needs --light-model distant");
     o.light_model = light::LightModel::kDistant;  // the accumulator is a distant-light fit
   }
+  if (o.light_model != light::LightModel::kDistant && o.reliability) {
+    if (o.light_model_set) throw node::UsageError("--reliability needs --light-model distant");
+    o.light_model = light::LightModel::kDistant;  // the row weights are EstimateLight's
+  }
   light::TransferOptions full_o;
   full_o.directions = o.directions;
   full_o.bands = o.bands;
@@ -639,6 +679,7 @@ int Run(int argc, char** argv) {
     if (o.grey_world) v->scene.point.albedo_groups = 0;
   }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
+  std::vector<double> measured_noise;  // DepthGeometry's measured noise k per sensor frame
   const auto start = Clock::now();
   std::string source_name;
   if (o.log.empty()) {
@@ -707,18 +748,17 @@ int Run(int argc, char** argv) {
                      static_cast<unsigned long long>(f.index), last_fusion.icp.failure.c_str());
       }
     };
+    light::DepthGeometryOptions dgo = o.depth_geometry;
+    dgo.smooth_radius = o.smooth_radius;
+    dgo.step = o.normal_step;
     auto sensor_geometry_of = [&](const sim::SimFrame& frame) {
-      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true);
-      if (o.smooth_radius >= 0 || o.normal_step >= 0) {
-        for (size_t i = 0; i < g.depth.size(); ++i) g.depth[i] = frame.depth_mm[i] * 0.001f;
-        const int radius = o.smooth_radius >= 0 ? o.smooth_radius : std::max(1, g.width / 80);
-        if (radius > 0) light::SmoothDepth(g.depth, g.width, g.height, radius);
-        light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
-                                o.normal_step > 0 ? o.normal_step : std::max(2, g.width / 160));
-      }
+      float noise = 0;
+      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true, dgo, &noise);
+      measured_noise.push_back(noise);
       if (o.normal_filter) {
         light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
       }
+      if (!o.reliability) g.reliability.clear();
       return g;
     };
     // G_r of the last integrated frame as scene_light receives it in gbuffer mode: the merged
@@ -754,12 +794,27 @@ int Run(int argc, char** argv) {
       }
       if (o.fused_normal_step > 0) {
         if (o.smooth_radius > 0) light::SmoothDepth(g.depth, g.width, g.height, o.smooth_radius);
-        light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
-                                o.fused_normal_step);
+        if (o.depth_geometry.normals_from != light::DepthNormals::kCentral) {
+          light::DepthNormalOptions no = o.depth_geometry.normals;
+          no.step = o.fused_normal_step;
+          if (no.noise_quadratic < 0) no.noise_quadratic = dgo.smoothed_noise_quadratic;
+          light::NormalsWithReliability(g.depth, g.width, g.height, g.intrinsics, no, &g.normals,
+                                        &g.reliability);
+        } else {
+          light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
+                                  o.fused_normal_step);
+        }
       }
       if (o.normal_filter) {
         light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
       }
+      if (o.reliability && g.reliability.empty()) {
+        light::NormalReliabilityOptions ro;
+        ro.noise_quadratic = dgo.smoothed_noise_quadratic;
+        light::NormalReliability(g.depth, g.width, g.height, g.intrinsics, g.normals, ro,
+                                 &g.reliability);
+      }
+      if (!o.reliability) g.reliability.clear();
       return g;
     };
     // --temporal: the camera rotation from the previous fed frame (d_now = R d_prev); a frame
@@ -798,7 +853,8 @@ int Run(int argc, char** argv) {
         for (int j = 0; j < 3; ++j) {
           if (inputs[j] == nullptr) continue;
           v->computer.Compute(inputs[j]->View(), {}, nullptr, &v->result);
-          v->temporal[j].Estimate(v->result, inputs[j]->grey, v->estimate, inputs[j]->colour, rot);
+          v->temporal[j].Estimate(v->result, inputs[j]->grey, v->estimate, inputs[j]->colour, rot,
+                                  inputs[j]->reliability);
         }
       }
     };
@@ -907,7 +963,7 @@ int Run(int argc, char** argv) {
           (sensor ? v->noisy : v->clean)
               .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
                                           f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
-                                          rot, &true_lamps));
+                                          rot, &true_lamps, g.reliability));
         }
       }
       if (fusion) {
@@ -915,7 +971,8 @@ int Run(int argc, char** argv) {
         fused_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
         for (Variant* v : {&full, &fast}) {
           v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
-                                              f.time_s, &camera_truth, temporal_of(v, 2), rot));
+                                              f.time_s, &camera_truth, temporal_of(v, 2), rot,
+                                              nullptr, g.reliability));
         }
       }
       std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg; sensor %.1f / %.1f",
@@ -1034,6 +1091,14 @@ int Run(int argc, char** argv) {
                     ", \"max_view_angle_deg\": " + Num(o.filter.max_view_angle_deg) +
                     ", \"max_plane_distance_rel\": " + Num(o.filter.max_plane_distance_rel) + "}"
               : std::string("null"))
+      << ",\n  \"depth_normals\": {\"from\": \""
+      << (o.depth_geometry.normals_from == light::DepthNormals::kAuto   ? "auto"
+          : o.depth_geometry.normals_from == light::DepthNormals::kEdge ? "edge"
+                                                                        : "central")
+      << "\""
+      << ", \"smooth_radius\": " << o.smooth_radius << ", \"step\": " << o.normal_step
+      << ", \"reliability_weights\": " << (o.reliability ? "true" : "false")
+      << ", \"measured_noise_quadratic_median\": " << Num(Quantile(measured_noise, 0.5)) << "}"
       << ",\n  \"full\": " << SeriesJson(full.clean) << ",\n  \"fast\": " << SeriesJson(fast.clean)
       << ",\n  \"with_sensor_noise\": {\"full\": " << SeriesJson(full.noisy)
       << ", \"fast\": " << SeriesJson(fast.noisy) << "}";

@@ -138,9 +138,10 @@ int OrientationBin(const float* t) {
 // row i and count[b] the rows per bin, a bin with more than `cap` rows keeps every k-th of them
 // (k = ceil(count / cap)); the rare orientations that pin the light down keep all their rows, the
 // big planes lose most of theirs. Compacts rows (cc values each), targets and rgb (3 values each,
-// if not null), bin and count in place to the kept rows and returns how many there are.
-size_t ThinByOrientation(float* rows, float* targets, float* rgb, size_t m, int cc, int cap,
-                         std::vector<int>& bin, std::vector<int>& count) {
+// if not null), weights (if not null), bin and count in place to the kept rows and returns how many
+// there are.
+size_t ThinByOrientation(float* rows, float* targets, float* rgb, float* weights, size_t m, int cc,
+                         int cap, std::vector<int>& bin, std::vector<int>& count) {
   std::vector<int> seen(kOrientationBins, 0), kept(kOrientationBins, 0);
   size_t n = 0;
   for (size_t i = 0; i < m; ++i) {
@@ -149,6 +150,7 @@ size_t ThinByOrientation(float* rows, float* targets, float* rgb, size_t m, int 
     if (seen[b]++ % k != 0) continue;
     std::copy_n(rows + i * cc, cc, rows + n * cc);
     if (rgb != nullptr) std::copy_n(rgb + 3 * i, 3, rgb + 3 * n);
+    if (weights != nullptr) weights[n] = weights[i];
     targets[n] = targets[i];
     bin[n++] = b;
     ++kept[b];
@@ -160,7 +162,8 @@ size_t ThinByOrientation(float* rows, float* targets, float* rgb, size_t m, int 
 }  // namespace
 
 LightEstimate SolveLight(std::span<const float> rows, std::span<const float> targets,
-                         int coefficient_count, const EstimateOptions& options) {
+                         int coefficient_count, const EstimateOptions& options,
+                         std::span<const float> row_weights) {
   const int cc = coefficient_count;
   if (cc != 4 && cc != 9 && cc != 16 && cc != 25) {
     throw LightError("light::SolveLight: coefficient_count must be 4, 9, 16 or 25, got " +
@@ -177,14 +180,22 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   if (options.huber_iterations < 0 || options.tukey_iterations < 0) {
     throw LightError("light::SolveLight: huber_iterations and tukey_iterations must be >= 0");
   }
+  if (!row_weights.empty() && row_weights.size() != m) {
+    throw LightError("light::SolveLight: " + std::to_string(row_weights.size()) +
+                     " row weights for " + std::to_string(m) + " targets");
+  }
   LightEstimate e;
   e.bands = static_cast<int>(std::lround(std::sqrt(cc)));
   e.pixels = static_cast<int>(m);
   if (static_cast<int>(m) < std::max(options.min_pixels, cc)) return e;
 
-  // Prior weights: normal-orientation balancing (see EstimateOptions::balance_normals).
+  // Prior weights: the rows' reliability (row_weights) times the normal-orientation balancing
+  // (see EstimateOptions::balance_normals).
   std::vector<float> prior(m, 1.0f);
+  if (!row_weights.empty()) std::copy(row_weights.begin(), row_weights.end(), prior.begin());
   std::vector<float> thin_rows, thin_targets;
+  std::vector<float> row_reliability;  // row_weights of the rows kept (the direction refits)
+  if (!row_weights.empty()) row_reliability = prior;
   if (options.balance_normals) {
     std::vector<int> bin(m), count(kOrientationBins, 0);
     for (size_t i = 0; i < m; ++i) {
@@ -197,18 +208,21 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     if (kCap > 0 && std::any_of(count.begin(), count.end(), [&](int c) { return c > kCap; })) {
       thin_rows.assign(rows.begin(), rows.end());
       thin_targets.assign(targets.begin(), targets.end());
-      m = ThinByOrientation(thin_rows.data(), thin_targets.data(), nullptr, m, cc, kCap, bin,
-                            count);
+      m = ThinByOrientation(thin_rows.data(), thin_targets.data(), nullptr, prior.data(), m, cc,
+                            kCap, bin, count);
       thin_rows.resize(m * cc);
       thin_targets.resize(m);
       rows = thin_rows;
       targets = thin_targets;
       prior.resize(m);
     }
+    if (!row_weights.empty()) row_reliability.assign(prior.begin(), prior.begin() + m);
+    // Each bin's total weight is the mean reliability of its rows (1 without row_weights): an
+    // orientation seen only by unreliable pixels is not balanced up to a full bin's weight.
     int used = 0;
     for (int c : count) used += c > 0;
     for (size_t i = 0; i < m; ++i) {
-      prior[i] = static_cast<float>(static_cast<double>(m) / (used * count[bin[i]]));
+      prior[i] *= static_cast<float>(static_cast<double>(m) / (used * count[bin[i]]));
     }
   }
   std::vector<float> weight = prior, residual(m, 0.0f), abs_r(m);
@@ -314,7 +328,10 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   if (options.direction_bands >= 2 && dc < cc) {
     std::vector<float> linear_rows(m * dc);
     for (size_t i = 0; i < m; ++i) std::copy_n(rows.data() + i * cc, dc, &linear_rows[i * dc]);
-    LightEstimate linear = SolveLight(linear_rows, targets, dc, options);
+    // The reliability of the (possibly thinned) rows, before balancing (empty: none given).
+    const std::span<const float> reliability = row_reliability;
+    std::vector<float> lit_weights;
+    LightEstimate linear = SolveLight(linear_rows, targets, dc, options, reliability);
     // A low-band model of max(0, n.d) is biased by the pixels facing away from the light (only
     // ambient reaches them): refit on the pixels facing the current estimate (n.d > 0.05, n from
     // T's band 1), where the shading is exactly linear in n.
@@ -323,18 +340,21 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
       for (size_t i = 0; i < m; ++i) normal[i] = sh::OptimalLinearDirection(rows.data() + i * cc);
       std::vector<float> lit_rows, lit_targets;
       lit_rows.reserve(m * dc);
+      lit_weights.reserve(m);
       lit_targets.reserve(m);
       for (int it = 0; it < 2; ++it) {
         lit_rows.clear();
         lit_targets.clear();
+        lit_weights.clear();
         const auto& d = linear.dominant_direction;
         for (size_t i = 0; i < m; ++i) {
           const sh::Vec3& n = normal[i];
           if (n[0] * d[0] + n[1] * d[1] + n[2] * d[2] <= 0.05) continue;
           lit_rows.insert(lit_rows.end(), &linear_rows[i * dc], &linear_rows[i * dc] + dc);
           lit_targets.push_back(targets[i]);
+          if (!reliability.empty()) lit_weights.push_back(reliability[i]);
         }
-        const LightEstimate refit = SolveLight(lit_rows, lit_targets, dc, options);
+        const LightEstimate refit = SolveLight(lit_rows, lit_targets, dc, options, lit_weights);
         if (!refit.valid) break;
         linear = refit;
       }
@@ -363,11 +383,12 @@ namespace {
 struct LightRows {
   int coefficient_count = 0;
   std::vector<float> rows, targets, rgb;
+  std::vector<float> weights;  // the pixels' reliability (empty: none given)
 };
 
 LightRows SelectRows(const TransferResult& transfer, std::span<const float> intensity,
                      const EstimateOptions& options, std::span<const uint8_t> colour,
-                     const std::string& what) {
+                     std::span<const float> reliability, const std::string& what) {
   const size_t pixels = static_cast<size_t>(transfer.width) * transfer.height;
   if (intensity.size() != pixels) {
     throw LightError(what + ": intensity has " + std::to_string(intensity.size()) +
@@ -390,6 +411,11 @@ LightRows SelectRows(const TransferResult& transfer, std::span<const float> inte
   if (!colour.empty() && colour.size() != 3 * pixels) {
     throw LightError(what + ": colour has " + std::to_string(colour.size()) +
                      " bytes, expected 3 x " + std::to_string(transfer.width) + "x" +
+                     std::to_string(transfer.height));
+  }
+  if (!reliability.empty() && reliability.size() != pixels) {
+    throw LightError(what + ": reliability has " + std::to_string(reliability.size()) +
+                     " values, transfer is " + std::to_string(transfer.width) + "x" +
                      std::to_string(transfer.height));
   }
   if (options.albedo_groups < 0 || options.albedo_groups > 255 || options.albedo_iterations < 1) {
@@ -419,6 +445,8 @@ LightRows SelectRows(const TransferResult& transfer, std::span<const float> inte
   targets.resize(max_rows);
   std::vector<float> rgb;  // linear colour per row (grouped)
   if (grouped) rgb.resize(3 * max_rows);
+  std::vector<float> weights;
+  if (!reliability.empty()) weights.resize(max_rows);
   size_t m = 0;
   const float inv_albedo = 1.0f / options.albedo;
   for (int y = s / 2; y < grid_h; y += s) {
@@ -429,6 +457,8 @@ LightRows SelectRows(const TransferResult& transfer, std::span<const float> inte
       const size_t p = static_cast<size_t>(py) * transfer.width + px;
       const float i = intensity[p];
       if (!v_data[g] || !(i >= options.min_intensity) || !(i <= options.max_intensity)) continue;
+      // A pixel of reliability <= 0 (or NaN) is no row; otherwise its weight.
+      if (!reliability.empty() && !(reliability[p] > 0)) continue;
       if (grouped) {
         const float r = SrgbToLinear(colour[3 * p]), gr = SrgbToLinear(colour[3 * p + 1]),
                     b = SrgbToLinear(colour[3 * p + 2]);
@@ -436,38 +466,45 @@ LightRows SelectRows(const TransferResult& transfer, std::span<const float> inte
         rgb[3 * m] = r, rgb[3 * m + 1] = gr, rgb[3 * m + 2] = b;
       }
       std::copy_n(t_data + g * cc, cc_out, &rows[m * cc_out]);
+      if (!reliability.empty()) weights[m] = std::min(1.0f, reliability[p]);
       targets[m++] = i * inv_albedo;
     }
   }
   rows.resize(m * cc_out);
   targets.resize(m);
   if (grouped) rgb.resize(3 * m);
+  if (!reliability.empty()) weights.resize(m);
   LightRows out;
   out.coefficient_count = cc_out;
   out.rows = std::move(rows);
   out.targets = std::move(targets);
   out.rgb = std::move(rgb);
+  out.weights = std::move(weights);
   return out;
 }
 
 // The fit of EstimateLight to selected rows (SolveLight, with the albedo alternation when rgb is
 // given and options.albedo_groups > 0).
 LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targets,
-                               std::vector<float> rgb, int cc_out, const EstimateOptions& options) {
+                               std::vector<float> rgb, std::vector<float> weights, int cc_out,
+                               const EstimateOptions& options) {
   const bool grouped = !rgb.empty() && options.albedo_groups > 0;
+  const bool weighted = !weights.empty();
   const int cells = options.albedo_groups;
   size_t m = targets.size();
-  if (!grouped) return SolveLight(rows, targets, cc_out, options);
+  if (!grouped) return SolveLight(rows, targets, cc_out, options, weights);
   const size_t usable = m;  // LightEstimate::pixels: before thinning, as SolveLight reports it
   // Thin the big orientation bins here already (SolveLight would do it in every alternation), so
   // that the albedo updates run over the same few thousand rows.
   if (options.balance_normals && options.max_rows_per_bin > 0) {
     std::vector<int> bin(m), count(kOrientationBins, 0);
     for (size_t i = 0; i < m; ++i) ++count[bin[i] = OrientationBin(&rows[i * cc_out])];
-    m = ThinByOrientation(rows.data(), targets.data(), rgb.data(), m, cc_out,
-                          options.max_rows_per_bin, bin, count);
+    m = ThinByOrientation(rows.data(), targets.data(), rgb.data(),
+                          weighted ? weights.data() : nullptr, m, cc_out, options.max_rows_per_bin,
+                          bin, count);
     rows.resize(m * cc_out);
     targets.resize(m);
+    if (weighted) weights.resize(m);
   }
   // Chromaticity cells of the linear colour (the albedo's under white light).
   std::vector<uint16_t> group(m);
@@ -490,7 +527,7 @@ LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targe
   inner.direction_bands = 0;  // the direction fits only matter for the final light
   for (int it = 0; it < options.albedo_iterations; ++it) {
     const bool last = it + 1 == options.albedo_iterations;
-    e = SolveLight(rows, scaled, cc_out, last ? options : inner);
+    e = SolveLight(rows, scaled, cc_out, last ? options : inner, weights);
     if (!e.valid || last) break;
     std::fill(sum_ip.begin(), sum_ip.end(), 0.0);
     std::fill(sum_pp.begin(), sum_pp.end(), 0.0);
@@ -498,8 +535,9 @@ LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targe
       double p = 0;
       for (int k = 0; k < cc_out; ++k) p += rows[i * cc_out + k] * e.coefficients[k];
       if (!(p > 0)) continue;
-      sum_ip[group[i]] += targets[i] * p;
-      sum_pp[group[i]] += p * p;
+      const double w = weighted ? weights[i] : 1.0;
+      sum_ip[group[i]] += w * targets[i] * p;
+      sum_pp[group[i]] += w * p * p;
     }
     // Normalise so that the row-weighted mean albedo stays options.albedo (the light's scale).
     double total = 0;
@@ -524,10 +562,12 @@ LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targe
 }  // namespace
 
 LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
-                            const EstimateOptions& options, std::span<const uint8_t> colour) {
-  LightRows r = SelectRows(transfer, intensity, options, colour, "light::EstimateLight");
+                            const EstimateOptions& options, std::span<const uint8_t> colour,
+                            std::span<const float> reliability) {
+  LightRows r =
+      SelectRows(transfer, intensity, options, colour, reliability, "light::EstimateLight");
   return EstimateFromRows(std::move(r.rows), std::move(r.targets), std::move(r.rgb),
-                          r.coefficient_count, options);
+                          std::move(r.weights), r.coefficient_count, options);
 }
 
 void ShRotationMatrix(const float rotation[9], int bands, std::vector<double>* out) {
@@ -566,9 +606,10 @@ LightEstimate TemporalLightEstimator::Estimate(const TransferResult& transfer,
                                                std::span<const float> intensity,
                                                const EstimateOptions& options,
                                                std::span<const uint8_t> colour,
-                                               const float* rotation) {
-  LightRows r =
-      SelectRows(transfer, intensity, options, colour, "light::TemporalLightEstimator::Estimate");
+                                               const float* rotation,
+                                               std::span<const float> reliability) {
+  LightRows r = SelectRows(transfer, intensity, options, colour, reliability,
+                           "light::TemporalLightEstimator::Estimate");
   const int cc = r.coefficient_count;
   const bool grouped = !r.rgb.empty();
   // Older frames: drop what no longer fits (coefficient count or grouping changed, or too old),
@@ -577,7 +618,8 @@ LightEstimate TemporalLightEstimator::Estimate(const TransferResult& transfer,
     history_.pop_back();
   }
   for (auto it = history_.begin(); it != history_.end();) {
-    if (it->coefficient_count != cc || it->rgb.empty() != !grouped) {
+    if (it->coefficient_count != cc || it->rgb.empty() != !grouped ||
+        it->weights.empty() != r.weights.empty()) {
       it = history_.erase(it);
     } else {
       ++it;
@@ -632,16 +674,17 @@ LightEstimate TemporalLightEstimator::Estimate(const TransferResult& transfer,
     for (float& v : f.rows) v *= s;
     for (float& v : f.targets) v *= s;
   }
-  Frame current{cc, r.rows, r.targets, r.rgb};
+  Frame current{cc, r.rows, r.targets, r.rgb, r.weights};
   std::vector<float> rows = std::move(r.rows), targets = std::move(r.targets),
-                     rgb = std::move(r.rgb);
+                     rgb = std::move(r.rgb), weights = std::move(r.weights);
   for (const Frame& f : history_) {
     rows.insert(rows.end(), f.rows.begin(), f.rows.end());
     targets.insert(targets.end(), f.targets.begin(), f.targets.end());
     rgb.insert(rgb.end(), f.rgb.begin(), f.rgb.end());
+    weights.insert(weights.end(), f.weights.begin(), f.weights.end());
   }
-  LightEstimate e =
-      EstimateFromRows(std::move(rows), std::move(targets), std::move(rgb), cc, options);
+  LightEstimate e = EstimateFromRows(std::move(rows), std::move(targets), std::move(rgb),
+                                     std::move(weights), cc, options);
   if (e.valid) {
     last_light_ = e.coefficients;
     last_rms_ = rms_under(current.rows, current.targets, last_light_);

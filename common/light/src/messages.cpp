@@ -46,7 +46,8 @@ GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const
 
 void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
                             const msgs::CameraInfo& info, std::vector<float>* depth_m,
-                            std::vector<float>* normals) {
+                            std::vector<float>* normals, const DepthGeometryOptions& options,
+                            std::vector<float>* reliability) {
   const int w = static_cast<int>(depth.width), h = static_cast<int>(depth.height);
   const Intrinsics k = IntrinsicsFrom(info, w, h);
   depth_m->resize(static_cast<size_t>(w) * h);
@@ -68,9 +69,8 @@ void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte>
                      std::string(msgs::EncodingName(depth.encoding)) +
                      " is not depth16 or float32");
   }
-  // Raw sensor depth is quantised: smooth it (edge-aware) before the normals.
-  SmoothDepth(*depth_m, w, h, std::max(1, w / 80));
-  NormalsFromDepth(*depth_m, w, h, k, normals, 0.05f, std::max(2, w / 160));
+  // Raw sensor depth is quantised: DepthGeometry smooths it when its measured noise calls for it.
+  DepthGeometry(*depth_m, w, h, k, options, normals, reliability);
 }
 
 void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,

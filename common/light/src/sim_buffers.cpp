@@ -5,7 +5,9 @@
 
 namespace probeless::light {
 
-GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_effects) {
+GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_effects,
+                                     const DepthGeometryOptions& depth_options,
+                                     float* measured_noise) {
   GeometryStorage g;
   const auto& r = frame.render;
   g.width = r.width;
@@ -25,9 +27,9 @@ GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_eff
   } else {
     g.depth.resize(pixels);
     for (size_t i = 0; i < pixels; ++i) g.depth[i] = frame.depth_mm[i] * 0.001f;
-    SmoothDepth(g.depth, g.width, g.height, std::max(1, g.width / 80));
-    NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
-                     std::max(2, g.width / 160));
+    const float noise = DepthGeometry(g.depth, g.width, g.height, g.intrinsics, depth_options,
+                                      &g.normals, &g.reliability);
+    if (measured_noise != nullptr) *measured_noise = noise;
     g.colour = frame.rgb;
     SrgbToLinearGrey(g.colour, &g.grey);
   }

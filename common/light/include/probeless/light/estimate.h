@@ -86,14 +86,22 @@ struct LightEstimate {
 // options.albedo. Only the shading variation inside a group and between groups of the same
 // colour then carries direction information, so an object whose albedo differs from the assumed
 // one (a skin-coloured head, a red ball) no longer biases the light (docs/light.md).
+//
+// `reliability` (optional, width * height values in [0, 1], e.g. NormalReliability): the weight
+// of each pixel's row; pixels <= 0 are left out. With balance_normals an orientation bin's total
+// weight is the mean reliability of its rows, so that unreliable normals (depth edges, creases)
+// are not balanced up to a full bin (docs/light.md, "Normal reliability").
 LightEstimate EstimateLight(const TransferResult& transfer, std::span<const float> intensity,
-                            const EstimateOptions& options, std::span<const uint8_t> colour = {});
+                            const EstimateOptions& options, std::span<const uint8_t> colour = {},
+                            std::span<const float> reliability = {});
 
 // The solver itself: rows (m x coefficient_count, row-major) and targets (m) already divided by
-// the albedo. Throws LightError for sizes that do not match or coefficient_count not in
+// the albedo; row_weights (optional, m values >= 0) weight the rows as EstimateLight's
+// reliability. Throws LightError for sizes that do not match or coefficient_count not in
 // {4, 9, 16, 25}.
 LightEstimate SolveLight(std::span<const float> rows, std::span<const float> targets,
-                         int coefficient_count, const EstimateOptions& options);
+                         int coefficient_count, const EstimateOptions& options,
+                         std::span<const float> row_weights = {});
 
 // The real-SH rotation matrix of `bands` bands (row-major bands^2 x bands^2) for the direction
 // rotation `rotation` (row-major 3 x 3, d' = R d): A[k][n] = integral Y_k(d) Y_n(R d) dw, so that
@@ -123,11 +131,11 @@ class TemporalLightEstimator {
 
   // As EstimateLight for the current frame. `rotation` (row-major 3 x 3, optional): the
   // camera's rotation from the previous call's camera frame into this one's (d_now = R d_prev;
-  // nullptr = the camera did not rotate). Throws LightError as EstimateLight (prefix
-  // "light::TemporalLightEstimator::Estimate").
+  // nullptr = the camera did not rotate); `reliability` as EstimateLight's. Throws LightError
+  // as EstimateLight (prefix "light::TemporalLightEstimator::Estimate").
   LightEstimate Estimate(const TransferResult& transfer, std::span<const float> intensity,
                          const EstimateOptions& options, std::span<const uint8_t> colour = {},
-                         const float* rotation = nullptr);
+                         const float* rotation = nullptr, std::span<const float> reliability = {});
   // Forgets the history (e.g. after a tracking loss or a cut).
   void Reset();
   const TemporalOptions& options() const { return options_; }
@@ -136,6 +144,7 @@ class TemporalLightEstimator {
   struct Frame {
     int coefficient_count = 0;
     std::vector<float> rows, targets, rgb;  // rows in the latest camera frame, pre-weighted
+    std::vector<float> weights;             // reliability per row (empty: none)
   };
   TemporalOptions options_;
   std::deque<Frame> history_;  // newest first

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "probeless/light/estimate.h"
+#include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/geometry_buffer.h"
@@ -29,12 +30,16 @@ GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const
                                   const msgs::CameraInfo& info);
 
 // A G-buffer from a depth16 (or float32 metres) image: depth in metres (depth_scale of `info`,
-// 0.001 when unset for depth16), smoothed by SmoothDepth (radius width / 80) — the returned depth
-// is the smoothed one — and normals from NormalsFromDepth (step max(2, width / 160)). Throws
-// LightError for another encoding, a size mismatch or bad intrinsics.
+// 0.001 when unset for depth16) and normals by DepthGeometry (`options`; default kAuto: a clean
+// image gets edge-aware normals, unsmoothed, step width / 320; a Kinect-like one is smoothed
+// (radius width / 80) and gets central differences (step max(2, width / 160))) — the returned
+// depth is the smoothed one — and, if `reliability` is given, the normals' reliability. Throws
+// LightError
+// for another encoding, a size mismatch or bad intrinsics.
 void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
                             const msgs::CameraInfo& info, std::vector<float>* depth_m,
-                            std::vector<float>* normals);
+                            std::vector<float>* normals, const DepthGeometryOptions& options = {},
+                            std::vector<float>* reliability = nullptr);
 
 // Linear grey intensity of an rgb8 / bgr8 / mono8 image into `grey` (width * height) and, if `rgb`
 // is given, the sRGB bytes in R, G, B order (3 per pixel; cleared for mono8) for EstimateLight's

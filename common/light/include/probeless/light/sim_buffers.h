@@ -6,6 +6,7 @@
 
 #include <vector>
 
+#include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/raytrace/scene.h"
@@ -18,18 +19,22 @@ struct GeometryStorage {
   int width = 0;
   int height = 0;
   Intrinsics intrinsics;
-  std::vector<float> depth;     // metres
-  std::vector<float> normals;   // camera frame
-  std::vector<uint8_t> colour;  // sRGB
-  std::vector<float> grey;      // linear grey intensity of the image (the estimator's I_c)
+  std::vector<float> depth;        // metres
+  std::vector<float> normals;      // camera frame
+  std::vector<uint8_t> colour;     // sRGB
+  std::vector<float> grey;         // linear grey intensity of the image (the estimator's I_c)
+  std::vector<float> reliability;  // optional per-pixel normal reliability (NormalReliability)
   GeometryView View() const { return {width, height, intrinsics, depth, normals, colour}; }
 };
 
 // sensor_effects = false: the noise-free render (exact depth, rendered normals, noiseless colour,
 // linear grey clamped to [0, 1]); true: the sensor's depth16 (quantised, noisy, holes) with normals
-// from SmoothDepth (radius width / 80) + NormalsFromDepth (step = width / 160 pixels, at least 2)
-// and the noisy rgb8 image.
-GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_effects);
+// and their reliability as the node's depth mode computes them (DepthGeometry with
+// `depth_options`) and the noisy rgb8 image; `measured_noise` (optional) gets DepthGeometry's
+// measured noise k.
+GeometryStorage GeometryFromSimFrame(const sim::SimFrame& frame, bool sensor_effects,
+                                     const DepthGeometryOptions& depth_options = {},
+                                     float* measured_noise = nullptr);
 
 // Owns the depth planes of auxiliary views.
 struct AuxiliaryStorage {
