@@ -190,7 +190,9 @@ TEST(PointLight, DistantLightMakesAutoPickDistant) {
   const double len = std::sqrt(d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]);
   const double d[3] = {d0[0] / len, d0[1] / len, d0[2] / len};
   const std::vector<float> image = s.LitByDistant(d, 2.0, 0.1);
-  const auto e = light::EstimatePointLight(s.View(), image, {}, 3, nullptr, s.colour);
+  light::PointLightOptions o;
+  o.screen_rows = 0;  // the full rule (the screen is ScreenKeepsTheDistantResultBitIdentical's)
+  const auto e = light::EstimatePointLight(s.View(), image, o, 3, nullptr, s.colour);
   ASSERT_TRUE(e.valid);
   EXPECT_FALSE(e.prefers_point) << "residual point " << e.median_residual_point << ", distant "
                                 << e.median_residual_distant << ", spread " << e.spread_deg;
@@ -226,6 +228,7 @@ TEST(PointLight, SceneLightSelectsTheModel) {
       EXPECT_EQ(r.light.coefficients, r.distant.coefficients);
     } else {
       EXPECT_EQ(r.used, light::LightModel::kPoint) << light::LightModelName(model);
+      EXPECT_FALSE(r.point.screened_out);
       EXPECT_EQ(r.light.coefficients, r.point.light.coefficients);
       EXPECT_LT(AngleDeg(r.light.dominant_direction, s.TrueDirection(lamp)), 1.0);
     }
@@ -233,9 +236,95 @@ TEST(PointLight, SceneLightSelectsTheModel) {
   const double d[3] = {0, -0.8, -0.6};
   o.model = light::LightModel::kAuto;
   const auto r = light::EstimateSceneLight(view, t, s.LitByDistant(d, 2.0, 0.1), o, s.colour);
-  ASSERT_TRUE(r.point.valid);
+  EXPECT_TRUE(r.point.valid || r.point.screened_out);
   EXPECT_EQ(r.used, light::LightModel::kDistant);
   EXPECT_EQ(r.light.coefficients, r.distant.coefficients);
+}
+
+double Distance(const Vec3f& a, const Vec3f& b) {
+  return std::hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+}
+
+// Two frames of a stream: the lamp moves by 0.25 m between them. The second frame started from the
+// first frame's lamp (PointLightTracker) ends where a cold start on that frame ends, both when the
+// previous lamp is close (the warm fit is kept) and when the tracker holds a wrong lamp (the cold
+// search takes over).
+TEST(PointLight, WarmStartConvergesToTheColdLamp) {
+  const Scene s;
+  const double first[3] = {-0.5, -0.6, 2.0}, second[3] = {-0.3, -0.75, 2.1};
+  const std::vector<float> image1 = s.LitByLamp(first, 3.0, 0.1);
+  const std::vector<float> image2 = s.LitByLamp(second, 2.5, 0.1);
+  light::PointLightOptions o;
+  o.select_model = false;
+  const auto cold = light::EstimatePointLight(s.View(), image2, o, 3, nullptr, s.colour);
+  ASSERT_TRUE(cold.valid);
+  EXPECT_FALSE(cold.warm_started);
+  EXPECT_LT(std::hypot(cold.lamps[0].position[0] - second[0], cold.lamps[0].position[1] - second[1],
+                       cold.lamps[0].position[2] - second[2]),
+            0.03);
+
+  light::PointLightTracker tracker;
+  const auto e1 =
+      light::EstimatePointLight(s.View(), image1, o, 3, nullptr, s.colour, nullptr, &tracker);
+  ASSERT_TRUE(e1.valid);
+  ASSERT_TRUE(tracker.Active());
+  EXPECT_NEAR(tracker.position[0], e1.lamps[0].position[0], 1e-6);
+  const auto warm =
+      light::EstimatePointLight(s.View(), image2, o, 3, nullptr, s.colour, nullptr, &tracker);
+  ASSERT_TRUE(warm.valid);
+  EXPECT_TRUE(warm.warm_started);
+  EXPECT_LT(Distance(warm.lamps[0].position, cold.lamps[0].position), 0.01);
+  EXPECT_LT(AngleDeg(warm.light.dominant_direction, cold.light.dominant_direction), 0.2);
+  EXPECT_NEAR(tracker.position[2], warm.lamps[0].position[2], 1e-6);  // updated
+
+  // A wrong lamp behind the camera: the warm fit is worse than the previous frame's, the cold
+  // search runs too and wins.
+  tracker.position = {0.5f, 1.5f, -1.0f};
+  tracker.intensity = {0.2f};
+  const auto wrong =
+      light::EstimatePointLight(s.View(), image2, o, 3, nullptr, s.colour, nullptr, &tracker);
+  ASSERT_TRUE(wrong.valid);
+  EXPECT_FALSE(wrong.warm_started);  // the cold fit was kept
+  EXPECT_LT(Distance(wrong.lamps[0].position, cold.lamps[0].position), 0.01);
+}
+
+// Under a distant light the screen rejects the point model on its subset of rows and auto returns
+// EstimateLight's estimate, bit for bit the distant model's; the tracker is left empty.
+TEST(PointLight, ScreenKeepsTheDistantResultBitIdentical) {
+  const Scene s;
+  light::TransferOptions to;
+  to.threads = 1;
+  light::TransferComputer computer(to);
+  light::TransferResult t;
+  const light::GeometryView view{s.w, s.h, s.k, s.depth, s.normals, s.colour};
+  computer.Compute(view, {}, nullptr, &t);
+  const double d0[3] = {-0.4, -0.8, -0.3};
+  const double len = std::sqrt(d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]);
+  const double d[3] = {d0[0] / len, d0[1] / len, d0[2] / len};
+  const std::vector<float> image = s.LitByDistant(d, 2.0, 0.1);
+  light::SceneLightOptions o;
+  o.model = light::LightModel::kDistant;
+  const auto distant = light::EstimateSceneLight(view, t, image, o, s.colour);
+  o.model = light::LightModel::kAuto;
+  light::PointLightTracker tracker;
+  tracker.position = {0, -1, 2};  // a lamp from an earlier frame: not used, warm fits run
+  tracker.intensity = {1};
+  for (int screen_rows : {400, 0}) {
+    o.point.screen_rows = screen_rows;
+    tracker.position = {0, -1, 2};
+    tracker.intensity = {1};
+    const auto warm = light::EstimateSceneLight(view, t, image, o, s.colour, &tracker);
+    EXPECT_FALSE(warm.point.screened_out);  // a warm stream skips the screen
+    EXPECT_EQ(warm.used, light::LightModel::kDistant);
+    EXPECT_FALSE(tracker.Active());  // reset: the next frame starts cold
+    const auto r = light::EstimateSceneLight(view, t, image, o, s.colour, &tracker);
+    EXPECT_EQ(r.point.screened_out, screen_rows > 0) << screen_rows;
+    EXPECT_EQ(r.used, light::LightModel::kDistant);
+    EXPECT_EQ(r.light.coefficients, distant.light.coefficients);  // bit-identical
+    EXPECT_EQ(r.light.dominant_direction, distant.light.dominant_direction);
+    EXPECT_EQ(r.light.intensity, distant.light.intensity);
+    EXPECT_FALSE(tracker.Active());
+  }
 }
 
 TEST(PointLight, BadInputThrowsClearErrors) {
@@ -256,6 +345,11 @@ TEST(PointLight, BadInputThrowsClearErrors) {
   three.max_lamps = 3;
   EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(s.View(), image, three, 3); }),
             "light::EstimatePointLight: max_lamps must be 1 or 2");
+  light::PointLightOptions screen;
+  screen.screen_rows = -1;
+  EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(s.View(), image, screen, 3); }),
+            "light::EstimatePointLight: screen_rows must be >= 0, warm_lm_iterations and "
+            "screen_lm_iterations >= 1");
   EXPECT_EQ(ErrorOf([] { light::ParseLightModel("near"); }),
             "light::ParseLightModel: light model must be distant, point or auto, got 'near'");
   EXPECT_EQ(light::ParseLightModel("auto"), light::LightModel::kAuto);

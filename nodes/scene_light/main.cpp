@@ -32,8 +32,9 @@
 //   "central" for a noisy one, by light::DepthNoiseQuadratic; "edge":
 //   light::NormalsWithReliability; "central": SmoothDepth w / 80 + NormalsFromDepth), smooth_radius
 //   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
-//   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r). The
-//   lamp positions are not in msgs::ShLight: they go to the debug log.
+//   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r).
+//   The lamp positions are not in msgs::ShLight: they go to the debug log. The point fit starts
+//   from the previous frame's lamp while the point model is in use (light::PointLightTracker).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -128,6 +129,7 @@ int Run(int argc, char** argv) {
     so.model = light::LightModel::kDistant;
   }
   light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
+  light::PointLightTracker point_tracker;       // warm starts of the point fit across frames
   light::TransferComputer computer(to);         // throws LightError for bad options
 
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
@@ -217,7 +219,8 @@ int Run(int argc, char** argv) {
     } else if (so.model == light::LightModel::kDistant) {
       e = light::EstimateLight(result, grey, eo, rgb, weights);
     } else {
-      light::SceneLightResult r = light::EstimateSceneLight(view, result, grey, so, rgb);
+      light::SceneLightResult r =
+          light::EstimateSceneLight(view, result, grey, so, rgb, &point_tracker);
       e = std::move(r.light);
       if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
         const auto& p = r.point.lamps[0].position;

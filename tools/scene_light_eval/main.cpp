@@ -43,10 +43,13 @@
 // --temporal implies distant):
 // the near-field point-lamp fit (docs/light.md, "Near-field lamps"), --lamps K (1 or 2),
 // --point-rows N (rows of the point fit, PointLightOptions::max_rows); adds
-// per series `point_chosen_frames`, `cpu_ms_point_median` (the point fit's thread CPU time:
-// EstimateSceneLight minus EstimateLight) and `lamp_position_error_m_median` (the chosen model's
-// strongest lamp to the nearest enabled true lamp, --sim; point frames only); --plots adds
-// scene_light_lamps.png.
+// per series `point_chosen_frames`, `point_screened_out_frames` / `point_warm_frames`
+// (PointLightEstimate::screened_out / warm_started; --no-screen: PointLightOptions::screen_rows 0,
+// --cold: no PointLightTracker, every frame starts cold; --screen-rows N, --screen-lm N,
+// --warm-lm N set PointLightOptions::screen_rows / screen_lm_iterations / warm_lm_iterations),
+// `cpu_ms_point_median` (the point fit's thread CPU time: EstimateSceneLight minus
+// EstimateLight) and `lamp_position_error_m_median` (the chosen model's strongest lamp to the
+// nearest enabled true lamp, --sim; point frames only); --plots adds scene_light_lamps.png.
 // The sensor path's normals are the node's depth mode's (light::DepthGeometry,
 // kAuto); --legacy-normals / --edge-normals force round 2's / the edge-aware ones
 // (--edge-noise-quad,
@@ -98,6 +101,7 @@ struct Options {
   std::string plots;
   int frames = 12;
   int directions = 32;
+  uint64_t seed = 1;  // --seed S: TransferOptions::seed (the SSDO jitter)
   int bands = 4;
   int threads = 2;
   bool aux = false;
@@ -134,7 +138,12 @@ struct Options {
   light::LightModel light_model = light::LightModel::kAuto;  // --light-model
   bool light_model_set = false;                              // --light-model given
   int lamps = 1;                                             // --lamps K
-  int point_rows = 0;  // --point-rows N: PointLightOptions::max_rows (0 = its default)
+  int point_rows = 0;        // --point-rows N: PointLightOptions::max_rows (0 = its default)
+  bool point_screen = true;  // --no-screen: PointLightOptions::screen_rows = 0
+  bool point_warm = true;    // --cold: no PointLightTracker (every frame starts cold)
+  int screen_rows = -1;      // --screen-rows N: PointLightOptions::screen_rows (-1 = default)
+  int screen_lm = -1;        // --screen-lm N: PointLightOptions::screen_lm_iterations
+  int warm_lm = -1;          // --warm-lm N: PointLightOptions::warm_lm_iterations
   // Depth-mode geometry of the sensor path (light::DepthGeometry, default kAuto: edge-aware on
   // clean depth, round 2's normals on noisy depth): --legacy-normals (always round 2's SmoothDepth
   // w/80 + NormalsFromDepth), --edge-normals (always edge-aware, at the scale of the measured
@@ -167,7 +176,9 @@ struct Sample {
   std::array<float, 3> lamp{NAN, NAN, NAN};
   std::vector<std::array<float, 3>> true_lamps;
   double lamp_error_m = NAN;
-  double point_gain = NAN, spread_deg = NAN;  // the auto rule's inputs (PointLightEstimate)
+  double point_gain = NAN, spread_deg = NAN;        // the auto rule's inputs (PointLightEstimate)
+  bool screened_out = false, warm_started = false;  // PointLightEstimate's
+  double screen_gain = NAN, screen_spread_deg = NAN;
 };
 
 struct Series {
@@ -194,8 +205,10 @@ std::string Num(double v) {
 
 std::string SeriesJson(const Series& s) {
   std::vector<double> dir, dir_cam, sh_err, ms_t, ms_e, cpu_t, cpu_e, cpu_p, lamp_err;
-  int point_chosen = 0;
+  int point_chosen = 0, screened_out = 0, warm_started = 0;
   for (const auto& x : s.samples) {
+    screened_out += x.screened_out ? 1 : 0;
+    warm_started += x.warm_started ? 1 : 0;
     cpu_p.push_back(x.cpu_ms_point);
     lamp_err.push_back(x.lamp_error_m);
     point_chosen += x.point_chosen ? 1 : 0;
@@ -218,6 +231,8 @@ std::string SeriesJson(const Series& s) {
     << ", \"cpu_ms_estimate_median\": " << Num(Quantile(cpu_e, 0.5))
     << ", \"dominant_dir_error_vs_camera_light_deg_median\": " << Num(Quantile(dir_cam, 0.5))
     << ", \"point_chosen_frames\": " << point_chosen
+    << ", \"point_screened_out_frames\": " << screened_out
+    << ", \"point_warm_frames\": " << warm_started
     << ", \"cpu_ms_point_median\": " << Num(Quantile(cpu_p, 0.5))
     << ", \"lamp_position_error_m_median\": " << Num(Quantile(lamp_err, 0.5)) << "}";
   return o.str();
@@ -235,6 +250,8 @@ struct Variant {
   // --temporal: one accumulator per input (clean, sensor, fused), fed with the frames before each
   // evaluated one.
   std::array<light::TemporalLightEstimator, 3> temporal;
+  // Warm starts of the point fit, one per input stream (clean, sensor, fused); not for --mix.
+  std::array<light::PointLightTracker, 3> trackers;
   Variant(const light::TransferOptions& o, const light::EstimateOptions& e,
           const light::TemporalOptions& t)
       : computer(o),
@@ -291,7 +308,8 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
                 const msgs::ShLight* camera_truth = nullptr,
                 light::TemporalLightEstimator* temporal = nullptr, const float* rotation = nullptr,
                 const std::vector<std::array<float, 3>>* true_lamps = nullptr,
-                std::span<const float> reliability = {}) {
+                std::span<const float> reliability = {},
+                light::PointLightTracker* tracker = nullptr) {
   Sample s;
   s.time_s = time_s;
   light::TransferResult& t = v.result;
@@ -310,15 +328,21 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     light::EstimateLight(t, grey, v.estimate, colour);  // timed alone for cpu_ms_point
     const double c_distant = ThreadCpuMs() - c1;
     const double c2 = ThreadCpuMs();
-    const light::SceneLightResult r = light::EstimateSceneLight(g, t, grey, v.scene, colour);
+    const light::SceneLightResult r =
+        light::EstimateSceneLight(g, t, grey, v.scene, colour, tracker);
     const double c_scene = ThreadCpuMs() - c2;
     s.cpu_ms_point = std::max(0.0, c_scene - c_distant);
+    s.cpu_ms_estimate = c_scene;  // EstimateSceneLight alone (it runs EstimateLight itself)
     e = r.light;
     s.point_chosen = r.used == light::LightModel::kPoint;
     if (r.point.median_residual_distant > 0) {
       s.point_gain = 1 - r.point.median_residual_point / r.point.median_residual_distant;
     }
     s.spread_deg = r.point.spread_deg;
+    s.screened_out = r.point.screened_out;
+    s.warm_started = r.point.warm_started;
+    s.screen_gain = r.point.screen_gain;
+    s.screen_spread_deg = r.point.screen_spread_deg;
     if (s.point_chosen && !r.point.lamps.empty()) {
       s.lamp = r.point.lamps[0].position;
       if (true_lamps != nullptr) {
@@ -330,7 +354,7 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
       }
     }
   }
-  s.cpu_ms_estimate = ThreadCpuMs() - c1;
+  if (std::isnan(s.cpu_ms_point)) s.cpu_ms_estimate = ThreadCpuMs() - c1;
   const auto t2 = Clock::now();
   s.ms_transfer = std::chrono::duration<double, std::milli>(t1 - t0).count();
   s.ms_estimate = std::chrono::duration<double, std::milli>(t2 - t1).count();
@@ -545,6 +569,8 @@ int Run(int argc, char** argv) {
       o.frames = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--directions")
       o.directions = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--seed")
+      o.seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
     else if (a == "--bands")
       o.bands = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--threads")
@@ -617,6 +643,16 @@ int Run(int argc, char** argv) {
           static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--reliability")
       o.reliability = true;
+    else if (a == "--no-screen")
+      o.point_screen = false;
+    else if (a == "--cold")
+      o.point_warm = false;
+    else if (a == "--screen-rows")
+      o.screen_rows = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--screen-lm")
+      o.screen_lm = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--warm-lm")
+      o.warm_lm = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-size")
       o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-resolution")
@@ -661,6 +697,7 @@ int Run(int argc, char** argv) {
   full_o.directions = o.directions;
   full_o.bands = o.bands;
   full_o.threads = o.threads;
+  full_o.seed = o.seed;
   full_o.analytic_unoccluded = !o.quadrature;
   light::TransferOptions fast_o = full_o;
   fast_o.subsample = 4;
@@ -676,6 +713,10 @@ int Run(int argc, char** argv) {
     v->scene.distant = eo;
     v->scene.point.max_lamps = o.lamps;
     if (o.point_rows > 0) v->scene.point.max_rows = o.point_rows;
+    if (o.screen_rows >= 0) v->scene.point.screen_rows = o.screen_rows;
+    if (o.screen_lm > 0) v->scene.point.screen_lm_iterations = o.screen_lm;
+    if (o.warm_lm > 0) v->scene.point.warm_lm_iterations = o.warm_lm;
+    if (!o.point_screen) v->scene.point.screen_rows = 0;
     if (o.grey_world) v->scene.point.albedo_groups = 0;
   }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
@@ -875,6 +916,7 @@ int Run(int argc, char** argv) {
       }
       const sim::SimFrame f = simulator.Render(index);
       const float* rot = o.temporal > 1 ? advance(f) : nullptr;
+      auto tracker_of = [&](Variant* v, int j) { return o.point_warm ? &v->trackers[j] : nullptr; };
       auto temporal_of = [&](Variant* v, int j) {
         return o.temporal > 1 ? &v->temporal[j] : nullptr;
       };
@@ -963,7 +1005,8 @@ int Run(int argc, char** argv) {
           (sensor ? v->noisy : v->clean)
               .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
                                           f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
-                                          rot, &true_lamps, g.reliability));
+                                          rot, &true_lamps, g.reliability,
+                                          tracker_of(v, sensor ? 1 : 0)));
         }
       }
       if (fusion) {
@@ -972,7 +1015,7 @@ int Run(int argc, char** argv) {
         for (Variant* v : {&full, &fast}) {
           v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
                                               f.time_s, &camera_truth, temporal_of(v, 2), rot,
-                                              nullptr, g.reliability));
+                                              nullptr, g.reliability, tracker_of(v, 2)));
         }
       }
       std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg; sensor %.1f / %.1f",
@@ -995,13 +1038,20 @@ int Run(int argc, char** argv) {
             c.estimate_dir[2], n.estimate_dir[0], n.estimate_dir[1], n.estimate_dir[2]);
         if (o.light_model != light::LightModel::kDistant) {
           std::fprintf(stderr,
-                       "\n  point model: clean %s (gain %.2f, spread %.1f deg), lamp (%.2f %.2f "
-                       "%.2f) %.2f m off",
-                       c.point_chosen ? "chosen" : "not chosen", c.point_gain, c.spread_deg,
-                       c.lamp[0], c.lamp[1], c.lamp[2], c.lamp_error_m);
-          std::fprintf(
-              stderr, "; sensor %s (gain %.2f, spread %.1f deg), lamp %.2f m off; true lamps",
-              n.point_chosen ? "chosen" : "not chosen", n.point_gain, n.spread_deg, n.lamp_error_m);
+                       "\n  point model: clean %s%s (screen %.2f / %.1f deg; gain %.2f, spread "
+                       "%.1f deg), lamp (%.2f %.2f %.2f) %.2f m off",
+                       c.point_chosen ? "chosen" : "not chosen",
+                       c.screened_out ? ", screened out" : (c.warm_started ? ", warm" : ""),
+                       c.screen_gain, c.screen_spread_deg, c.point_gain, c.spread_deg, c.lamp[0],
+                       c.lamp[1], c.lamp[2], c.lamp_error_m);
+          std::fprintf(stderr,
+                       "; sensor %s%s (screen %.2f / %.1f deg; gain %.2f, spread %.1f deg), lamp "
+                       "%.2f m off; "
+                       "true lamps",
+                       n.point_chosen ? "chosen" : "not chosen",
+                       n.screened_out ? ", screened out" : (n.warm_started ? ", warm" : ""),
+                       n.screen_gain, n.screen_spread_deg, n.point_gain, n.spread_deg,
+                       n.lamp_error_m);
           for (const auto& l : c.true_lamps) {
             std::fprintf(stderr, " (%.2f %.2f %.2f)", l[0], l[1], l[2]);
           }
@@ -1064,8 +1114,9 @@ int Run(int argc, char** argv) {
       const Pending& p = frames[seq];
       const light::GeometryView g{p.w, p.h, p.k, p.depth, p.normals, {}};
       for (Variant* v : {&full, &fast}) {
-        v->noisy.samples.push_back(
-            RunFrame(*v, g, greys[seq], colours[seq], {}, truths[seq], p.time_s));
+        v->noisy.samples.push_back(RunFrame(*v, g, greys[seq], colours[seq], {}, truths[seq],
+                                            p.time_s, nullptr, nullptr, nullptr, nullptr, {},
+                                            o.point_warm ? &v->trackers[1] : nullptr));
       }
     }
     // A log carries sensor data only: report it as both the top level and with_sensor_noise.

@@ -22,6 +22,10 @@ constexpr int kMinGroupRows = 16;
 constexpr int kMaxParams = 9;
 constexpr size_t kCoarseRows = 600;    // rows of the coarse searches (ranking only)
 constexpr int kSearchDirections = 32;  // lamp search: Fibonacci directions from the centroid
+// Median |residual| differences below this (image units, linear grey; a quarter of the smallest
+// 8-bit sRGB step above black is ~8e-5, noise on rendered or sensor images is >= 1e-3) do not
+// make a warm fit "worse" than the previous frame's.
+constexpr double kWarmResidualFloor = 1e-3;
 
 [[noreturn]] void Fail(const std::string& what) {
   throw LightError("light::EstimatePointLight: " + what);
@@ -317,6 +321,36 @@ double SolveLinear(const std::vector<std::vector<double>>& cols, const Rows& r,
   return cost;
 }
 
+// SolveLinear for two columns f (the candidate's) and c (fixed across candidates) from their
+// weighted sums, in closed form (the same regularisation and active-set rule): the coarse
+// searches rank hundreds of candidates, and one pass over the rows per candidate is what they
+// cost. `sums` = {f.f, f.c, f.I}, `fixed` = {c.c, c.I, I.I} (all weighted). Returns the cost.
+double SolveTwoColumns(const double* sums, const double* fixed, double* x0, double* x1) {
+  const double ff = sums[0], fc = sums[1], fi = sums[2];
+  const double cc = fixed[0], ci = fixed[1], ii = fixed[2];
+  const double tr = ff + cc;
+  const double a = ff + 1e-9 * tr + 1e-30, d = cc + 1e-9 * tr + 1e-30;
+  const double det = a * d - fc * fc;
+  double p = 0, q = 0;
+  if (det > 0) {
+    p = (d * fi - fc * ci) / det;
+    q = (a * ci - fc * fi) / det;
+  }
+  if (det > 0 && (p < 0 || q < 0)) {
+    if (p < 0 && q < 0) {
+      p = q = 0;
+    } else if (p < 0) {
+      p = 0;
+      q = std::max(0.0, ci / (cc + 1e-9 * cc + 1e-30));
+    } else {
+      q = 0;
+      p = std::max(0.0, fi / (ff + 1e-9 * ff + 1e-30));
+    }
+  }
+  *x0 = p, *x1 = q;
+  return ii - 2 * (p * fi + q * ci) + p * p * ff + 2 * p * q * fc + q * q * cc;
+}
+
 // Every step-th row (with its albedo parameter and weight): the coarse searches only rank
 // candidates, a few hundred rows do.
 struct Subset {
@@ -373,16 +407,35 @@ std::vector<Candidate> SearchLamp(const Rows& r, const Albedos& a, const std::ve
     }
   }
   for (size_t i = 0; i < r.size(); ++i) cols[fixed_lamps + 1][i] = a.At(i) * r.t0[i];
+  // One lamp and the ambient term: closed form from one pass per candidate.
+  double fixed_sums[3] = {0, 0, 0};
+  if (fixed_lamps == 0) {
+    for (size_t i = 0; i < r.size(); ++i) {
+      const double c = cols[1][i], y = r.intensity[i];
+      fixed_sums[0] += w[i] * c * c, fixed_sums[1] += w[i] * c * y, fixed_sums[2] += w[i] * y * y;
+    }
+  }
   std::vector<Candidate> all;
   for (const sh::Vec3& d : dirs) {
     for (double dist : distances) {
       Candidate c;
       for (int k = 0; k < 3; ++k) c.p[k] = centroid[k] + dist * d[k];
-      for (size_t i = 0; i < r.size(); ++i) {
-        cols[fixed_lamps][i] =
-            a.At(i) * LampShading(&r.x[3 * i], &r.n[3 * i], c.p, min_d2, nullptr);
+      if (fixed_lamps == 0) {
+        double sums[3] = {0, 0, 0};
+        for (size_t i = 0; i < r.size(); ++i) {
+          const double f = a.At(i) * LampShading(&r.x[3 * i], &r.n[3 * i], c.p, min_d2, nullptr);
+          const double wf = w[i] * f;
+          sums[0] += wf * f, sums[1] += wf * cols[1][i], sums[2] += wf * r.intensity[i];
+        }
+        c.linear.resize(2);
+        c.cost = SolveTwoColumns(sums, fixed_sums, &c.linear[0], &c.linear[1]);
+      } else {
+        for (size_t i = 0; i < r.size(); ++i) {
+          cols[fixed_lamps][i] =
+              a.At(i) * LampShading(&r.x[3 * i], &r.n[3 * i], c.p, min_d2, nullptr);
+        }
+        c.cost = SolveLinear(cols, r, w, &c.linear);
       }
-      c.cost = SolveLinear(cols, r, w, &c.linear);
       all.push_back(std::move(c));
     }
   }
@@ -399,6 +452,117 @@ std::vector<Candidate> SearchLamp(const Rows& r, const Albedos& a, const std::ve
     if (static_cast<int>(best.size()) >= keep) break;
   }
   return best;
+}
+
+// Every step-th row (the screen's rows).
+Rows EveryNth(const Rows& r, size_t step) {
+  Rows s;
+  for (size_t i = 0; i < r.size(); i += step) {
+    s.x.insert(s.x.end(), &r.x[3 * i], &r.x[3 * i] + 3);
+    s.n.insert(s.n.end(), &r.n[3 * i], &r.n[3 * i] + 3);
+    s.intensity.push_back(r.intensity[i]);
+    s.t0.push_back(r.t0[i]);
+    s.group.push_back(r.group[i]);
+  }
+  return s;
+}
+
+// Cold start of the one-lamp model: the coarse search on <= kCoarseRows rows, a short plain LM
+// (o.lm_iterations) from the 3 best starts; theta of the cheapest (empty if none).
+std::vector<double> ColdStart(const Model& point, const Rows& r, const Albedos& a0,
+                              const PointLightOptions& o, const Vec3f* initial_direction,
+                              double min_d2) {
+  std::vector<double> ones(r.size(), 1.0);
+  const size_t coarse_step = std::max<size_t>(1, r.size() / kCoarseRows);
+  double best = INFINITY;
+  std::vector<double> th;
+  const Subset sub = Subsample(r, a0, ones, coarse_step);
+  for (const Candidate& c :
+       SearchLamp(sub.rows, sub.albedos, sub.w, {}, initial_direction, min_d2, 3)) {
+    std::vector<double> t = {c.p[0], c.p[1], c.p[2], c.linear[0], c.linear[1]};
+    Albedos a = a0;
+    const double cost = Minimise(point, r, &a, ones, o.lm_iterations, t.data());
+    if (cost < best) best = cost, th = t;
+  }
+  return th;
+}
+
+// The nested distant model (I = a_g (max(0, n.q) / pi + c T_0)) fitted to the rows like the point
+// model (coarse search over 64 Fibonacci directions and the initial direction, then the robust
+// fit); returns its median absolute residual.
+double DistantMedianResidual(const Rows& r, const PointLightOptions& o, int groups,
+                             const Vec3f* initial_direction, double min_d2) {
+  Model distant{true, 0, min_d2};
+  Albedos a = MakeAlbedos(r, groups, o.albedo);
+  std::vector<double> w(r.size(), 1.0), ones(r.size(), 1.0);
+  std::vector<sh::Vec3> dirs = sh::FibonacciSphere(64);
+  if (initial_direction != nullptr) {
+    const Vec3f& d = *initial_direction;
+    const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (len > 0) dirs.push_back({d[0] / len, d[1] / len, d[2] / len});
+  }
+  const size_t coarse_step = std::max<size_t>(1, r.size() / kCoarseRows);
+  const Subset sub = Subsample(r, a, ones, coarse_step);
+  const Rows& rs = sub.rows;
+  std::vector<double> ambient(rs.size());
+  double fixed_sums[3] = {0, 0, 0};
+  for (size_t i = 0; i < rs.size(); ++i) {
+    ambient[i] = sub.albedos.At(i) * rs.t0[i];
+    const double y = rs.intensity[i];
+    fixed_sums[0] += sub.w[i] * ambient[i] * ambient[i];
+    fixed_sums[1] += sub.w[i] * ambient[i] * y;
+    fixed_sums[2] += sub.w[i] * y * y;
+  }
+  double best = INFINITY;
+  std::vector<double> td;
+  for (const sh::Vec3& d : dirs) {
+    double sums[3] = {0, 0, 0};
+    for (size_t i = 0; i < rs.size(); ++i) {
+      const double c = rs.n[3 * i] * d[0] + rs.n[3 * i + 1] * d[1] + rs.n[3 * i + 2] * d[2];
+      const double f = sub.albedos.At(i) * std::max(0.0, c) / kPi;
+      const double wf = sub.w[i] * f;
+      sums[0] += wf * f, sums[1] += wf * ambient[i], sums[2] += wf * rs.intensity[i];
+    }
+    double x0 = 0, x1 = 0;
+    const double cost = SolveTwoColumns(sums, fixed_sums, &x0, &x1);
+    if (cost < best) best = cost, td = {d[0] * x0, d[1] * x0, d[2] * x0, x1};
+  }
+  if (td.empty()) td = {0, 0, 0, 0};
+  if (td[0] == 0 && td[1] == 0 && td[2] == 0) td[1] = -1e-3;  // a start off the kink
+  Fit(distant, r, o, &a, &w, td.data());
+  return MedianAbs(Residuals(distant, r, a, td.data()));
+}
+
+// p90 angle (degrees) between the direction to a lamp at p from each point (3 values per point)
+// and the irradiance-weighted (1 / r^2) mean of those directions: the auto rule's spread.
+double LampSpreadDeg(const double* p, const std::vector<double>& points, double min_d2) {
+  const size_t np = points.size() / 3;
+  double mean[3] = {0, 0, 0};
+  for (size_t i = 0; i < np; ++i) {
+    const double* x = &points[3 * i];
+    const double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
+    const double len2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    const double len = std::sqrt(len2);
+    if (!(len > 0)) continue;
+    const double e = 1.0 / std::max(min_d2, len2);
+    for (int c = 0; c < 3; ++c) mean[c] += e * v[c] / len;
+  }
+  const double ml = std::sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
+  if (!(ml > 0)) return 0;
+  std::vector<double> angles;
+  for (size_t i = 0; i < np; ++i) {
+    const double* x = &points[3 * i];
+    const double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
+    const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(len > 0)) continue;
+    double dot = 0;
+    for (int c = 0; c < 3; ++c) dot += v[c] / len * mean[c] / ml;
+    angles.push_back(std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / kPi);
+  }
+  if (angles.empty()) return 0;
+  const size_t q = std::min(angles.size() - 1, angles.size() * 9 / 10);
+  std::nth_element(angles.begin(), angles.begin() + q, angles.end());
+  return angles[q];
 }
 
 }  // namespace
@@ -427,7 +591,7 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
                                       const PointLightOptions& o, int bands,
                                       const TransferResult* transfer,
                                       std::span<const uint8_t> colour,
-                                      const Vec3f* initial_direction) {
+                                      const Vec3f* initial_direction, PointLightTracker* tracker) {
   ValidateGeometryView(g, "EstimatePointLight");
   const size_t pixels = static_cast<size_t>(g.width) * g.height;
   if (intensity.size() != pixels) {
@@ -454,6 +618,16 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   }
   if (bands < 1 || bands > 5) Fail("bands must be 1..5, got " + std::to_string(bands));
   if (o.surface_stride < 1) Fail("surface_stride must be >= 1");
+  if (o.screen_rows < 0 || o.warm_lm_iterations < 1 || o.screen_lm_iterations < 1) {
+    Fail("screen_rows must be >= 0, warm_lm_iterations and screen_lm_iterations >= 1");
+  }
+  // Every return below without a used point fit leaves the tracker reset.
+  const bool warm = tracker != nullptr && tracker->Active();
+  PointLightTracker previous;
+  if (tracker != nullptr) {
+    previous = *tracker;
+    tracker->Reset();
+  }
 
   const auto& k = g.intrinsics;
   auto has_surface = [&](size_t p) {
@@ -466,12 +640,21 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
     const float i = intensity[p];
     return has_surface(p) && i >= o.min_intensity && i <= o.max_intensity;
   };
+  // The usable pixels (for the row stride) counted on every 4th row and column, x 16: a full pass
+  // costs ~1.2 ms at 640x480, as much as the rest of a screened-out frame.
   size_t surface = 0, count = 0;
-  for (size_t p = 0; p < pixels; ++p) {
-    if (has_surface(p)) {
+  for (int v = 0; v < g.height; v += 4) {
+    for (int u = 0; u < g.width; u += 4) {
+      const size_t p = static_cast<size_t>(v) * g.width + u;
+      if (!has_surface(p)) continue;
       ++surface;
-      if (usable(p)) ++count;
+      const float i = intensity[p];
+      if (i >= o.min_intensity && i <= o.max_intensity) ++count;
     }
+  }
+  count *= 16;
+  for (size_t p = 0; surface == 0 && p < pixels; ++p) {
+    if (has_surface(p)) surface = 1;
   }
   if (surface == 0) Fail("no valid pixels (depth > 0 with a normal)");
   PointLightEstimate out;
@@ -515,26 +698,73 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   const int groups = cells * cells;
   std::vector<double> ones(r.size(), 1.0);
   const size_t coarse_step = std::max<size_t>(1, r.size() / kCoarseRows);
-  // One lamp: coarse search, a short plain LM from the 3 best starts, the robust fit from the
-  // best of them.
   Model point{false, 1, min_d2};
+  // Screen (cold starts with selection only): the selection on a subset of the rows; a clear
+  // "distant" there ends the estimate. The full rule runs after a passed screen, so the screen
+  // can only turn "point" into "distant", never the reverse.
+  if (o.select_model && !warm && o.screen_rows > 0 &&
+      r.size() >= 2 * static_cast<size_t>(o.screen_rows)) {
+    const Rows rs = EveryNth(r, r.size() / o.screen_rows);
+    PointLightOptions so = o;
+    so.huber_iterations = std::min(o.huber_iterations, 1);
+    so.tukey_iterations = std::min(o.tukey_iterations, 1);
+    so.lm_iterations = o.screen_lm_iterations;
+    Albedos a = MakeAlbedos(rs, groups, o.albedo);
+    std::vector<double> w(rs.size(), 1.0);
+    std::vector<double> t = ColdStart(point, rs, a, so, initial_direction, min_d2);
+    if (!t.empty()) {
+      Fit(point, rs, so, &a, &w, t.data());
+      const double med_point = MedianAbs(Residuals(point, rs, a, t.data()));
+      const double med_distant = DistantMedianResidual(rs, so, groups, initial_direction, min_d2);
+      const double gain = med_distant > 0 ? 1 - med_point / med_distant : 0;
+      const double spread = LampSpreadDeg(t.data(), rs.x, min_d2);
+      out.screen_gain = static_cast<float>(gain);
+      out.screen_spread_deg = static_cast<float>(spread);
+      if (gain < o.screen_min_gain || spread < o.screen_min_spread_deg) {
+        out.screened_out = true;
+        out.median_residual_point = med_point;
+        out.median_residual_distant = med_distant;
+        out.spread_deg = static_cast<float>(spread);
+        return out;
+      }
+    }
+  }
+  // One lamp: warm start from the tracker's strongest lamp, or the cold search (a short plain LM
+  // from the 3 best starts); then the robust fit.
   Albedos a_point = MakeAlbedos(r, groups, o.albedo);
   std::vector<double> w_point(r.size(), 1.0);
   std::vector<double> th;
-  {
-    double best = INFINITY;
-    const Subset sub = Subsample(r, a_point, ones, coarse_step);
-    for (const Candidate& c :
-         SearchLamp(sub.rows, sub.albedos, sub.w, {}, initial_direction, min_d2, 3)) {
-      std::vector<double> t = {c.p[0], c.p[1], c.p[2], c.linear[0], c.linear[1]};
-      Albedos a = a_point;
-      const double cost = Minimise(point, r, &a, ones, o.lm_iterations, t.data());
-      if (cost < best) best = cost, th = t;
+  if (warm) {
+    PointLightOptions wo = o;
+    wo.lm_iterations = o.warm_lm_iterations;
+    th = {previous.position[0], previous.position[1], previous.position[2], previous.intensity[0],
+          previous.ambient};
+    Fit(point, r, wo, &a_point, &w_point, th.data());
+    out.median_residual_point = MedianAbs(Residuals(point, r, a_point, th.data()));
+    out.warm_started = true;
+    if (!(out.median_residual_point <=
+          o.warm_max_residual_ratio * previous.median_residual + kWarmResidualFloor)) {
+      // The lamp moved too far, switched, or the scene changed: the cold fit as well, the
+      // better one is kept.
+      Albedos a_cold = MakeAlbedos(r, groups, o.albedo);
+      std::vector<double> w_cold(r.size(), 1.0);
+      std::vector<double> t_cold = ColdStart(point, r, a_cold, o, initial_direction, min_d2);
+      if (!t_cold.empty()) {
+        Fit(point, r, o, &a_cold, &w_cold, t_cold.data());
+        const double med = MedianAbs(Residuals(point, r, a_cold, t_cold.data()));
+        if (med < out.median_residual_point) {
+          th = t_cold, a_point = a_cold, w_point = w_cold;
+          out.median_residual_point = med;
+          out.warm_started = false;
+        }
+      }
     }
+  } else {
+    th = ColdStart(point, r, a_point, o, initial_direction, min_d2);
+    if (th.empty()) return out;  // no finite start (cannot happen with finite, filtered rows)
+    Fit(point, r, o, &a_point, &w_point, th.data());
+    out.median_residual_point = MedianAbs(Residuals(point, r, a_point, th.data()));
   }
-  if (th.empty()) return out;  // no finite start (cannot happen with finite, filtered rows)
-  Fit(point, r, o, &a_point, &w_point, th.data());
-  out.median_residual_point = MedianAbs(Residuals(point, r, a_point, th.data()));
   // Optional second lamp: searched with the first one fixed, then both refined together.
   if (o.max_lamps >= 2) {
     const std::vector<double> first(th.begin(), th.begin() + 3);
@@ -560,34 +790,11 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   }
   // The nested distant model on the same rows, for the model selection.
   if (o.select_model) {
-    Model distant{true, 0, min_d2};
-    Albedos a = MakeAlbedos(r, groups, o.albedo);
-    std::vector<double> w(r.size(), 1.0);
-    std::vector<sh::Vec3> dirs = sh::FibonacciSphere(64);
-    if (initial_direction != nullptr) {
-      const Vec3f& d = *initial_direction;
-      const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      if (len > 0) dirs.push_back({d[0] / len, d[1] / len, d[2] / len});
-    }
-    const Subset sub = Subsample(r, a, ones, coarse_step);
-    const Rows& rs = sub.rows;
-    std::vector<std::vector<double>> cols(2, std::vector<double>(rs.size()));
-    for (size_t i = 0; i < rs.size(); ++i) cols[1][i] = sub.albedos.At(i) * rs.t0[i];
-    double best = INFINITY;
-    std::vector<double> td;
-    for (const sh::Vec3& d : dirs) {
-      for (size_t i = 0; i < rs.size(); ++i) {
-        const double c = rs.n[3 * i] * d[0] + rs.n[3 * i + 1] * d[1] + rs.n[3 * i + 2] * d[2];
-        cols[0][i] = sub.albedos.At(i) * std::max(0.0, c) / kPi;
-      }
-      std::vector<double> x;
-      const double cost = SolveLinear(cols, rs, sub.w, &x);
-      if (cost < best) best = cost, td = {d[0] * x[0], d[1] * x[0], d[2] * x[0], x[1]};
-    }
-    if (td.empty()) td = {0, 0, 0, 0};
-    if (td[0] == 0 && td[1] == 0 && td[2] == 0) td[1] = -1e-3;  // a start off the kink
-    Fit(distant, r, o, &a, &w, td.data());
-    out.median_residual_distant = MedianAbs(Residuals(distant, r, a, td.data()));
+    // A warm stream (the point model was used in the previous frame) needs the gain only to
+    // notice that the scene turned distant: the shorter solves of the warm fit do.
+    PointLightOptions dopt = o;
+    if (warm) dopt.lm_iterations = o.warm_lm_iterations;
+    out.median_residual_distant = DistantMedianResidual(r, dopt, groups, initial_direction, min_d2);
   }
 
   // Outputs at the visible surface points (as SurfaceLightingTruth).
@@ -688,18 +895,30 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
                           : 0;
   out.prefers_point = o.select_model && out.valid && gain >= o.auto_min_gain &&
                       out.spread_deg >= o.auto_min_spread_deg;
+  if (tracker != nullptr && out.valid && (!o.select_model || out.prefers_point)) {
+    for (const PointLamp& l : out.lamps) {
+      tracker->position.insert(tracker->position.end(),
+                               {l.position[0], l.position[1], l.position[2]});
+      tracker->intensity.push_back(l.intensity);
+    }
+    tracker->ambient = out.ambient;
+    tracker->median_residual = out.median_residual_point;
+  }
   return out;
 }
 
 SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult& transfer,
                                     std::span<const float> intensity,
                                     const SceneLightOptions& options,
-                                    std::span<const uint8_t> colour) {
+                                    std::span<const uint8_t> colour, PointLightTracker* tracker) {
   SceneLightResult out;
   out.distant = EstimateLight(transfer, intensity, options.distant, colour);
   out.light = out.distant;
   out.used = LightModel::kDistant;
-  if (options.model == LightModel::kDistant || !out.distant.valid) return out;
+  if (options.model == LightModel::kDistant || !out.distant.valid) {
+    if (tracker != nullptr) tracker->Reset();
+    return out;
+  }
   const int bands = options.distant.bands > 0
                         ? options.distant.bands
                         : static_cast<int>(std::lround(std::sqrt(transfer.coefficient_count)));
@@ -708,8 +927,9 @@ SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult&
                              out.distant.dominant_direction[2] != 0;
   PointLightOptions po = options.point;
   po.select_model = options.model == LightModel::kAuto;
-  out.point = EstimatePointLight(g, intensity, po, bands, &transfer, colour,
-                                 has_direction ? &out.distant.dominant_direction : nullptr);
+  out.point =
+      EstimatePointLight(g, intensity, po, bands, &transfer, colour,
+                         has_direction ? &out.distant.dominant_direction : nullptr, tracker);
   const bool use = options.model == LightModel::kPoint ? out.point.valid : out.point.prefers_point;
   if (use) {
     out.light = out.point.light;

@@ -197,7 +197,9 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
       }
       valid[o] = 1;
       const float x0 = d * (u - cx) * ifx, x1 = d * (v - cy) * ify, x2 = d;
-      const float* off = offsets_.data() + static_cast<size_t>((c & 1) + 2 * (r & 1)) * n_dir;
+      // Random offsets per 2x2 block of image pixels (§5.1), keyed by the full-resolution pixel
+      // also in OursFast: a sparse sample gets exactly the full variant's transfer at its pixel.
+      const float* off = offsets_.data() + static_cast<size_t>((u & 1) + 2 * (v & 1)) * n_dir;
       for (int j = 0; j < n_dir; ++j) {
         const auto& om = dirs[j];
         const float cosn = om[0] * nx + om[1] * ny + om[2] * nz;  // (omega_j . n(x)), eq. 6

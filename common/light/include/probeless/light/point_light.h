@@ -5,6 +5,7 @@
 // docs/light.md, "Near-field lamps".
 #pragma once
 
+#include <cmath>
 #include <span>
 #include <string_view>
 #include <vector>
@@ -53,6 +54,41 @@ struct PointLightOptions {
   // false and median_residual_distant 0 (EstimateSceneLight sets it for kAuto only).
   bool select_model = true;
   int surface_stride = 8;  // every surface_stride-th pixel with depth is a point of the SH average
+  // Screen (select_model, cold starts only; docs/light.md "Cost"): the whole selection (point and
+  // distant fits) first runs on every k-th row, about screen_rows of them (if the fit has at least
+  // 2 x screen_rows rows), with one Huber and one Tukey reweighting and screen_lm_iterations per
+  // LM solve; the full fit follows only if the screen's gain is >= screen_min_gain and its spread
+  // (over the rows' points) is >= screen_min_spread_deg, otherwise the point model is rejected
+  // there (PointLightEstimate::screened_out). The screen can only turn "point" into "distant",
+  // never the reverse: a distant result stays bit-identical. Its gain can lie far below the full
+  // fit's (a worse local minimum on fewer rows), so it rejects only where the point model does not
+  // beat the distant one at all (gain < 0) or the lamp is effectively distant. 0 rows = no screen.
+  int screen_rows = 400;
+  int screen_lm_iterations = 4;
+  float screen_min_gain = 0.0f;
+  float screen_min_spread_deg = 5.0f;
+  // Warm start (a PointLightTracker holding the previous frame's lamp): no coarse search and no
+  // screen; the robust fit starts from the previous lamp with warm_lm_iterations per LM solve (also
+  // used by the nested distant fit of that frame). If its median |residual| exceeds
+  // warm_max_residual_ratio x the previous frame's (+ 1e-3), the cold search runs as well and the
+  // better (lower median |residual|) fit is kept.
+  int warm_lm_iterations = 2;
+  float warm_max_residual_ratio = 1.5f;
+};
+
+// The lamps of the previous frame of one stream, for warm starts (PointLightOptions::warm_*).
+// Owned by the caller (one per image stream, e.g. the node, one per evaluated input), passed to
+// every frame; EstimatePointLight / EstimateSceneLight fill it after a point fit that is used
+// (valid, and preferred when selecting) and reset it otherwise, so a stream that turns distant
+// starts cold again. Positions in the camera frame of that frame (metres): the camera's motion
+// between frames is left to the fit.
+struct PointLightTracker {
+  std::vector<float> position;   // 3 per lamp, strongest first; empty = no lamp (cold start)
+  std::vector<float> intensity;  // per lamp (PointLamp::intensity)
+  float ambient = 0;
+  double median_residual = 0;  // the fit's median |residual| (image units)
+  bool Active() const { return !intensity.empty(); }
+  void Reset() { *this = PointLightTracker{}; }
 };
 
 // A point lamp: position in the camera frame (metres; x right, y down, z forward) and intensity =
@@ -82,6 +118,11 @@ struct PointLightEstimate {
   float spread_deg = 0;  // p90 angle between the strongest lamp's direction at a point and the mean
   bool prefers_point = false;  // the auto rule (PointLightOptions::auto_min_gain / _spread_deg)
   int rows = 0;                // rows of the fit
+  // The screen rejected the point model (PointLightOptions::screen_rows): no full fit ran, valid is
+  // false, the median residuals and spread_deg are the screen's (its subset of rows).
+  bool screened_out = false;
+  float screen_gain = NAN, screen_spread_deg = NAN;  // the screen's figures (NAN: it did not run)
+  bool warm_started = false;  // started from a PointLightTracker's lamp (and kept that fit)
 };
 
 // Fits options.max_lamps point lamps, a uniform ambient term and per-group albedos to the image by
@@ -91,14 +132,16 @@ struct PointLightEstimate {
 // positions around the visible surface (and along `initial_direction`, e.g. the distant
 // estimate's dominant direction, camera frame, if given). `bands` (1..5) of the output SH light.
 // `colour`: optional sRGB bytes (3 per pixel) for the albedo groups; `transfer` optional, same
-// size as `g`. Throws LightError("light::EstimatePointLight: ...") for an invalid view (see
+// size as `g`. `tracker` (optional): warm start from its lamp and updated afterwards (see
+// PointLightTracker). Throws LightError("light::EstimatePointLight: ...") for an invalid view (see
 // ValidateGeometryView: sizes, missing normals, non-finite intrinsics), sizes that do not match,
 // bad options, or no pixel with depth and normal at all.
 PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const float> intensity,
                                       const PointLightOptions& options, int bands,
                                       const TransferResult* transfer = nullptr,
                                       std::span<const uint8_t> colour = {},
-                                      const Vec3f* initial_direction = nullptr);
+                                      const Vec3f* initial_direction = nullptr,
+                                      PointLightTracker* tracker = nullptr);
 
 struct SceneLightOptions {
   // auto by default: on the four evaluation scenarios it picks the distant model in every frame of
@@ -117,11 +160,13 @@ struct SceneLightResult {
 
 // EstimateLight, then (model kPoint / kAuto, and the distant fit had enough pixels) the point fit
 // initialised from its dominant direction; kPoint uses the point estimate when it is valid, kAuto
-// when PointLightEstimate::prefers_point. Throws LightError as EstimateLight and
-// EstimatePointLight.
+// when PointLightEstimate::prefers_point. `tracker` (optional, one per stream): warm starts of
+// the point fit across frames, reset when the point model is not used. Throws LightError as
+// EstimateLight and EstimatePointLight.
 SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult& transfer,
                                     std::span<const float> intensity,
                                     const SceneLightOptions& options,
-                                    std::span<const uint8_t> colour = {});
+                                    std::span<const uint8_t> colour = {},
+                                    PointLightTracker* tracker = nullptr);
 
 }  // namespace probeless::light
