@@ -550,9 +550,6 @@ TEST(Estimate, ShRotationMatrixRotatesADirectionalLight) {
             "light::ShRotationMatrix: bands must be 1..5, got 6");
 }
 
-// One frame of a synthetic stream: the GroupedScene surfaces (one grey material, normals facing
-// the camera) lit by a directional light `direction` (camera frame; power 0 = off) plus ambient,
-// intensities with Gaussian noise of `noise` (seeded).
 // A sphere of radius `radius` centred 3 m ahead (on the optical axis) in front of a wall at 4 m,
 // seen by the 160x120 camera of Scene: depth and exact normals.
 Scene SphereScene(double radius) {
@@ -696,6 +693,26 @@ TEST(Reliability, DepthNoiseTellsCleanFromQuantisedDepth) {
   EXPECT_GT(k_clean, 0.0f);
   EXPECT_LT(k_clean, defaults.fine_noise_quadratic);
   EXPECT_GT(k_coarse, defaults.fine_noise_quadratic);
+
+  // Too little depth beyond 1.5 m: not measured (NaN) rather than "clean"; DepthGeometry then
+  // takes the noisy image's path and says so.
+  Scene near(Shape::kPlane);
+  for (float& d : near.depth) d = d > 0 ? 1.0f : 0.0f;
+  EXPECT_TRUE(std::isnan(light::DepthNoiseQuadratic(near.depth, near.w, near.h)));
+  std::vector<float> normals, reliability;
+  EXPECT_TRUE(std::isnan(
+      light::DepthGeometry(near.depth, near.w, near.h, near.k, defaults, &normals, &reliability)));
+  ASSERT_EQ(normals.size(), 3u * near.w * near.h);
+  const size_t centre = static_cast<size_t>(near.h / 2) * near.w + near.w / 2;
+  EXPECT_NEAR(normals[3 * centre + 2], -1.0f, 1e-4);
+  light::DepthGeometryOptions bad;
+  bad.step = 0;
+  EXPECT_EQ(
+      ErrorOf([&] { light::DepthGeometry(near.depth, near.w, near.h, near.k, bad, &normals); }),
+      "light::DepthGeometry: step must be -1 (by the noise) or >= 1, got 0");
+  EXPECT_EQ(
+      ErrorOf([&] { light::DepthGeometry(near.depth, near.w, near.h, near.k, defaults, nullptr); }),
+      "light::DepthGeometry: normals must not be null");
 }
 
 // A room-like frame: unoccluded transfer rows of three planes (floor, back and left wall: 3000,
@@ -807,6 +824,9 @@ TEST(Estimate, ReliabilityWeightsIgnoreCorruptedNormals) {
             "light::SolveLight: 3 row weights for 2 targets");
 }
 
+// One frame of a synthetic stream: the GroupedScene surfaces (one grey material, normals facing
+// the camera) lit by a directional light `direction` (camera frame; power 0 = off) plus ambient,
+// intensities with Gaussian noise of `noise` (seeded).
 GroupedScene MakeNoisyFrame(const sh::Vec3& direction, double power, double noise, uint64_t seed) {
   GroupedScene g = MakeGroupedScene(0.6, 0.6);
   auto l = sh::DirectionalLight(direction, power, 4);

@@ -325,6 +325,21 @@ TEST(PointLight, ScreenKeepsTheDistantResultBitIdentical) {
     EXPECT_EQ(r.light.intensity, distant.light.intensity);
     EXPECT_FALSE(tracker.Active());
   }
+  // Under a lamp the screen lets the point model through: the same choice and lamp as without it.
+  const double lamp[3] = {-0.5, -0.6, 2.0};
+  const std::vector<float> lamp_image = s.LitByLamp(lamp, 3.0, 0.1);
+  o.point.screen_rows = 400;
+  const auto screened = light::EstimateSceneLight(view, t, lamp_image, o, s.colour);
+  o.point.screen_rows = 0;
+  const auto unscreened = light::EstimateSceneLight(view, t, lamp_image, o, s.colour);
+  EXPECT_FALSE(screened.point.screened_out);
+  EXPECT_EQ(screened.used, light::LightModel::kPoint);
+  EXPECT_EQ(unscreened.used, light::LightModel::kPoint);
+  ASSERT_FALSE(screened.point.lamps.empty());
+  ASSERT_FALSE(unscreened.point.lamps.empty());
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(screened.point.lamps[0].position[k], unscreened.point.lamps[0].position[k], 0.01);
+  }
 }
 
 TEST(PointLight, BadInputThrowsClearErrors) {

@@ -14,8 +14,8 @@
 //   publish_transfer, `scene/transfer` (msgs::TransferBuffer, the per-pixel T for differential
 //   rendering), and with publish_indirect `scene/indirect` (msgs::Image rgb32f, the one-bounce
 //   indirect light of eq. 10-12 from the previous frame's dominant light: linear RGB radiance for
-//   albedo 1; from the second frame on, none while no light has been estimated). A frame without
-//   camera info or image yet is skipped (one warning).
+//   albedo 1; from the second frame on, none after a frame without an estimated light). A frame
+//   without camera info or image yet is skipped (one warning).
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
 //   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
 //   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
@@ -236,7 +236,6 @@ int Run(int argc, char** argv) {
       light::FillShLight(e, out.message);
       light_pub.Publish(std::move(loan));
       ++published;
-      dominant = light::DominantLight{e.dominant_direction, e.intensity};
     }
     if (publish_transfer) {
       const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
@@ -255,7 +254,14 @@ int Run(int argc, char** argv) {
       std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
       transfer_pub->Publish(std::move(loan));
     }
-    if (indirect) {
+    // The next frame's bounce light (eq. 10): only from a light with a direction and power.
+    const float* d = e.dominant_direction.data();
+    if (e.valid && e.intensity > 0 && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > 0.5f) {
+      dominant = light::DominantLight{e.dominant_direction, e.intensity};
+    } else {
+      dominant.reset();
+    }
+    if (indirect && !result.indirect.empty()) {
       const size_t bytes =
           msgs::Image::MessageBytesFor(result.width, result.height, msgs::Encoding::kRgb32f);
       if (!indirect_pub || bytes > indirect_capacity) {

@@ -367,7 +367,9 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   if (const char* fo = std::getenv("FUSION_EVAL_FOCAL")) k.fx = k.fy = std::atof(fo);
   if (const char* kd = std::getenv("FUSION_EVAL_K1")) {  // experiment: radial undistortion k1[,k2]
     float k1 = 0, k2 = 0;
-    std::sscanf(kd, "%f,%f", &k1, &k2);
+    if (std::sscanf(kd, "%f,%f", &k1, &k2) < 1) {
+      throw UsageError("FUSION_EVAL_K1 must be k1[,k2], got '" + std::string(kd) + "'");
+    }
     for (Frame& fr : frames) {
       recon::DepthImage out;
       out.Resize(fr.depth.width, fr.depth.height);

@@ -184,6 +184,12 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     throw LightError("light::SolveLight: " + std::to_string(row_weights.size()) +
                      " row weights for " + std::to_string(m) + " targets");
   }
+  for (const float w : row_weights) {
+    if (!(w >= 0) || !std::isfinite(w)) {
+      throw LightError("light::SolveLight: row weights must be finite and >= 0, got " +
+                       std::to_string(w));
+    }
+  }
   LightEstimate e;
   e.bands = static_cast<int>(std::lround(std::sqrt(cc)));
   e.pixels = static_cast<int>(m);

@@ -380,10 +380,10 @@ struct Candidate {
   std::vector<double> linear;
 };
 
-// Coarse search for one more lamp (positions around the surface centroid along 64 Fibonacci
-// directions and the initial direction, at 6 distances), the lamps in `fixed` kept where they
-// are; each candidate's intensities and ambient by SolveLinear. Returns the best `keep`
-// candidates at least 0.3 m apart, cheapest first.
+// Coarse search for one more lamp (positions around the surface centroid along kSearchDirections
+// Fibonacci directions and the initial direction, at 5 distances, 0.5 to 4 m), the lamps in `fixed`
+// kept where they are; each candidate's intensities and ambient by SolveLinear. Returns the best
+// `keep` candidates at least 0.3 m apart, cheapest first.
 std::vector<Candidate> SearchLamp(const Rows& r, const Albedos& a, const std::vector<double>& w,
                                   const std::vector<double>& fixed, const Vec3f* initial_direction,
                                   double min_d2, int keep) {
@@ -621,6 +621,19 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   if (o.screen_rows < 0 || o.warm_lm_iterations < 1 || o.screen_lm_iterations < 1) {
     Fail("screen_rows must be >= 0, warm_lm_iterations and screen_lm_iterations >= 1");
   }
+  if (o.albedo_groups > 255)
+    Fail("albedo_groups must be 0..255, got " + std::to_string(o.albedo_groups));
+  if (!(o.min_intensity >= 0) || !(o.max_intensity > o.min_intensity)) {
+    Fail("min_intensity must be >= 0 and below max_intensity");
+  }
+  if (!(o.min_lamp_distance_m > 0) || !std::isfinite(o.min_lamp_distance_m)) {
+    Fail("min_lamp_distance_m must be finite and > 0");
+  }
+  for (const float v : {o.second_lamp_gain, o.auto_min_gain, o.auto_min_spread_deg,
+                        o.screen_min_gain, o.screen_min_spread_deg}) {
+    if (!std::isfinite(v)) Fail("gains and spreads must be finite");
+  }
+  if (!(o.warm_max_residual_ratio >= 1)) Fail("warm_max_residual_ratio must be >= 1");
   // Every return below without a used point fit leaves the tracker reset.
   const bool warm = tracker != nullptr && tracker->Active();
   PointLightTracker previous;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -221,21 +222,25 @@ float DepthNoiseQuadratic(std::span<const float> depth, int width, int height) {
                      " values, expected " + std::to_string(width) + "x" + std::to_string(height));
   }
   double sum = 0;
-  size_t count = 0;
+  size_t count = 0, candidates = 0;
   for (int v = 0; v < height; v += 2) {
     const float* row = depth.data() + static_cast<size_t>(v) * width;
     for (int u = 1; u + 1 < width; ++u) {
       const float z = row[u], za = row[u - 1], zb = row[u + 1];
       if (!(z > 1.5f) || !(za > 0) || !(zb > 0)) continue;
       const float e = (1.0f / za - 2.0f / z + 1.0f / zb) * z * z;
-      // Depth edges out; zero second differences (a quantised plateau, or a plane) too, so that
+      if (!(std::abs(e) < 0.02f * z)) continue;  // a depth edge
+      ++candidates;
+      // Zero second differences (a quantised plateau, or a plane) are left out, so that
       // quantisation counts with its step size however rarely the steps occur.
-      if (!(std::abs(e) < 0.02f * z) || !(std::abs(e) > 1e-5f * z)) continue;
+      if (!(std::abs(e) > 1e-5f * z)) continue;
       const double q = e / (double(z) * z);
       sum += q * q;
       ++count;
     }
   }
+  if (candidates < 1000) return std::numeric_limits<float>::quiet_NaN();  // too little far depth
+  // Mostly plateaus and planes: a clean image (the few departures are curvature, not noise).
   if (count < 1000) return 0.0f;
   return static_cast<float>(std::sqrt(sum / count / 6.0));
 }
@@ -243,12 +248,27 @@ float DepthNoiseQuadratic(std::span<const float> depth, int width, int height) {
 float DepthGeometry(std::span<float> depth, int width, int height, const Intrinsics& k,
                     const DepthGeometryOptions& options, std::vector<float>* normals,
                     std::vector<float>* reliability) {
+  const std::string what = "light::DepthGeometry: ";
+  if (normals == nullptr) throw LightError(what + "normals must not be null");
+  if (options.smooth_radius < -1) {
+    throw LightError(what + "smooth_radius must be -1 (by the noise) or >= 0, got " +
+                     std::to_string(options.smooth_radius));
+  }
+  if (options.step == 0 || options.step < -1) {
+    throw LightError(what + "step must be -1 (by the noise) or >= 1, got " +
+                     std::to_string(options.step));
+  }
+  if (!(options.fine_noise_quadratic >= 0) || !(options.smoothed_noise_quadratic > 0)) {
+    throw LightError(what + "fine_noise_quadratic must be >= 0 and smoothed_noise_quadratic > 0");
+  }
   const bool automatic =
       options.normals_from == DepthNormals::kAuto || options.smooth_radius < 0 ||
       options.step < 0 ||
       (options.normals_from == DepthNormals::kEdge && options.normals.noise_quadratic < 0);
-  const float noise = automatic ? DepthNoiseQuadratic(depth, width, height) : 0.0f;
-  const bool fine = noise < options.fine_noise_quadratic;
+  const float noise = automatic ? DepthNoiseQuadratic(depth, width, height)
+                                : std::numeric_limits<float>::quiet_NaN();
+  // Unmeasured noise (too little depth beyond 1.5 m) counts as noisy: the conservative choice.
+  const bool fine = std::isfinite(noise) && noise < options.fine_noise_quadratic;
   const bool edge = options.normals_from == DepthNormals::kEdge ||
                     (options.normals_from == DepthNormals::kAuto && fine);
   if (!edge) {
@@ -270,8 +290,10 @@ float DepthGeometry(std::span<float> depth, int width, int height, const Intrins
   DepthNormalOptions no = options.normals;
   no.step = options.step >= 1 ? options.step
                               : (fine ? std::max(1, width / 320) : std::max(2, width / 160));
-  if (no.noise_quadratic < 0)
-    no.noise_quadratic = radius > 0 ? options.smoothed_noise_quadratic : noise;
+  if (no.noise_quadratic < 0) {
+    no.noise_quadratic =
+        radius > 0 || !std::isfinite(noise) ? options.smoothed_noise_quadratic : noise;
+  }
   if (radius > 0) SmoothDepth(depth, width, height, radius);
   std::vector<float> scratch;
   NormalsWithReliability(depth, width, height, k, no, normals,

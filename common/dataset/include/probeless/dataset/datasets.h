@@ -42,7 +42,7 @@ struct DatasetOptions {
   // registered to /camera/depth, the convention of probeless cameras. 7-Scenes publishes no colour
   // calibration: the colour camera is the Kinect v1's nominal one (fx = fy = 525 px, principal
   // point (320, 240), 2.5 cm from the depth camera along x; docs/dataset.md shows the check).
-  // false, or frames of another size: the colour files as they are.
+  // false, frames of another size, or a folder without depth files: the colour files as they are.
   bool register_colour = true;
 };
 

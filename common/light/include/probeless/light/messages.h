@@ -34,8 +34,7 @@ GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const
 // image gets edge-aware normals, unsmoothed, step width / 320; a Kinect-like one is smoothed
 // (radius width / 80) and gets central differences (step max(2, width / 160))) — the returned
 // depth is the smoothed one — and, if `reliability` is given, the normals' reliability. Throws
-// LightError
-// for another encoding, a size mismatch or bad intrinsics.
+// LightError for another encoding, a size mismatch or bad intrinsics.
 void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
                             const msgs::CameraInfo& info, std::vector<float>* depth_m,
                             std::vector<float>* normals, const DepthGeometryOptions& options = {},

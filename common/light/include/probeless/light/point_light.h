@@ -101,7 +101,9 @@ struct PointLamp {
 };
 
 struct PointLightEstimate {
-  bool valid = false;  // false: too few usable rows (< 32)
+  // false: too few usable rows (< 32), screened out (auto), no lamp irradiance on the surface, or
+  // no surface point for the SH average.
+  bool valid = false;
   // Strongest first (mean irradiance over the visible surface points).
   std::vector<PointLamp> lamps;
   float ambient = 0;  // band-0 SH coefficient of a uniform ambient light

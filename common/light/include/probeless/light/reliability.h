@@ -79,7 +79,9 @@ void NormalsWithReliability(std::span<const float> depth, int width, int height,
 // departure of the pixel's depth from the plane through its neighbours (second difference of
 // 1/z, times z^2), 1e-5 z < |e| < 0.02 z (depth edges left out, and the zeros of quantisation
 // plateaus and planes: quantisation counts with its step however rarely a step occurs); every
-// 2nd row. 0 when fewer than 1000 such pixels. Throws LightError for a size mismatch.
+// 2nd row. NaN (not measured) when fewer than 1000 pixels beyond 1.5 m qualify (edges aside), 0
+// when fewer than 1000 of them depart from their neighbours' plane (plateaus and planes: a clean
+// image). Throws LightError for a size mismatch.
 float DepthNoiseQuadratic(std::span<const float> depth, int width, int height);
 
 // Which normals the depth mode computes (DepthGeometry).
@@ -113,8 +115,10 @@ struct DepthGeometryOptions {
 // The depth mode's G-buffer from raw depth (metres, 0 = none): smooths `depth` in place
 // (SmoothDepth, when the scale calls for it), fills `normals` (3 per pixel) and, if not null,
 // `reliability` (NormalsWithReliability's; with central differences all 1 where there is a
-// normal). Returns the measured noise k (DepthNoiseQuadratic; 0 if not measured). Throws
-// LightError as NormalsWithReliability / NormalsFromDepth.
+// normal). Returns the measured noise k (DepthNoiseQuadratic; NaN if not measured — then the image
+// counts as noisy, and kEdge uses smoothed_noise_quadratic). Throws LightError for a null
+// `normals`, smooth_radius < -1, step 0 or < -1, bad noise thresholds, and as
+// NormalsWithReliability / NormalsFromDepth.
 float DepthGeometry(std::span<float> depth, int width, int height, const Intrinsics& intrinsics,
                     const DepthGeometryOptions& options, std::vector<float>* normals,
                     std::vector<float>* reliability = nullptr);

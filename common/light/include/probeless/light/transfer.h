@@ -82,6 +82,10 @@ struct TransferOptions {
   float depth_bias_m = 0.01f;
   float depth_bias_rel = 0.005f;
   // 1 = every pixel (Ours); 4 = every 4th pixel in x and y, upsampled bicubically (OursFast).
+  // The per-2x2-block sample offsets (seed) are keyed by the full-resolution pixel, so a sparse
+  // sample's T equals Ours' at that pixel; with an even subsample all samples (pixels s*i + s/2)
+  // share one offset set — as do the full variant's fit rows at stride 4 — so the offsets' noise
+  // is a common bias rather than interleaved (docs/light.md "OursFast").
   int subsample = 1;
   int threads = 2;  // worker threads (>= 1; the caller's thread is one of them)
   // true: T = (A_l / pi) Y_n(n) - sum_j (1 - K_j) (omega_j . n) W_jn, i.e. the exact projection
