@@ -160,7 +160,9 @@ TEST(PointLight, RecoversLampPositionAndDirection) {
     EXPECT_GT(e.light.confidence, 0.9f);
     // One albedo equal to PointLightOptions::albedo: the intensity is the lamp's (with groups it is
     // scaled by the albedos' row mean).
-    if (!colour) EXPECT_NEAR(e.lamps[0].intensity, 3.0, 0.05);
+    if (!colour) {
+      EXPECT_NEAR(e.lamps[0].intensity, 3.0, 0.05);
+    }
     EXPECT_TRUE(e.prefers_point) << "residual point " << e.median_residual_point << ", distant "
                                  << e.median_residual_distant << ", spread " << e.spread_deg;
   }
