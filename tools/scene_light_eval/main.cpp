@@ -56,6 +56,13 @@
 // --edge-threshold, --edge-radius, --edge-view: light::DepthNormalOptions); --reliability uses
 // the normals' reliability as the estimator's row weights. A noise-free-depth run: a scenario
 // without its `sensor:` block (the "sensor" path then sees millimetre depth16 without noise).
+// Cast shadows (round 4, on by default for the full variant, --fast-shadows for OursFast too;
+// --no-shadows: off) refine the distant light's direction
+// (light::RefineLightWithShadows; EstimateSceneLight's when the distant model is chosen, timed
+// apart); not with --temporal. Per series `shadow_accepted_frames`, `shadow_dir_error_deg_median`
+// (the search's direction, accepted or not) and `cpu_ms_shadow_median` (process CPU, both
+// threads); per frame the search's figures are printed. Tuning flags: the comment on
+// Options::shadows.
 #include "probeless/node/main.h"
 
 #include <time.h>
@@ -80,6 +87,7 @@
 #include "probeless/light/messages.h"
 #include "probeless/light/point_light.h"
 #include "probeless/light/reliability.h"
+#include "probeless/light/shadow.h"
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
@@ -154,6 +162,14 @@ struct Options {
   // DepthGeometry's; fused: light::NormalReliability of G_r, or NormalsWithReliability's with
   // --fused-normal-step).
   bool reliability = false;
+  // Cast shadows refine the distant light's direction (light::ShadowOptions, on by default;
+  // --no-shadows: off). Tuning: --shadow-stride, --shadow-coarse-stride, --shadow-directions,
+  // --shadow-candidates, --shadow-steps, --shadow-bias, --shadow-bias-rel, --shadow-thickness,
+  // --shadow-thickness-steps, --shadow-behind-lit, --shadow-chroma, --shadow-min-score,
+  // --shadow-min-gain, --shadow-min-contrast, --shadow-max-runner-up, --shadow-keep.
+  bool shadows = light::ShadowOptions{}.enabled;
+  bool fast_shadows = false;  // --fast-shadows: the shadow search for OursFast too
+  light::ShadowOptions shadow;
 };
 
 // One evaluated frame of one variant.
@@ -179,6 +195,13 @@ struct Sample {
   double point_gain = NAN, spread_deg = NAN;        // the auto rule's inputs (PointLightEstimate)
   bool screened_out = false, warm_started = false;  // PointLightEstimate's
   double screen_gain = NAN, screen_spread_deg = NAN;
+  // Cast shadows: whether the search accepted a direction, its score, the score without shadows,
+  // the lit / shadowed contrast, the runner-up's score, the score of the true direction, the
+  // error of its direction (accepted or not) and its process CPU ms (both threads).
+  bool shadow_valid = false;
+  double shadow_score = NAN, shadow_unshadowed = NAN, shadow_dir_error_deg = NAN;
+  double shadow_contrast = NAN, shadow_truth_score = NAN, shadow_runner_up = NAN;
+  double cpu_ms_shadow = NAN;
 };
 
 struct Series {
@@ -205,10 +228,14 @@ std::string Num(double v) {
 
 std::string SeriesJson(const Series& s) {
   std::vector<double> dir, dir_cam, sh_err, ms_t, ms_e, cpu_t, cpu_e, cpu_p, lamp_err;
-  int point_chosen = 0, screened_out = 0, warm_started = 0;
+  std::vector<double> shadow_dir, cpu_s;
+  int point_chosen = 0, screened_out = 0, warm_started = 0, shadow_accepted = 0;
   for (const auto& x : s.samples) {
     screened_out += x.screened_out ? 1 : 0;
     warm_started += x.warm_started ? 1 : 0;
+    shadow_dir.push_back(x.shadow_dir_error_deg);
+    cpu_s.push_back(x.cpu_ms_shadow);
+    shadow_accepted += x.shadow_valid ? 1 : 0;
     cpu_p.push_back(x.cpu_ms_point);
     lamp_err.push_back(x.lamp_error_m);
     point_chosen += x.point_chosen ? 1 : 0;
@@ -234,7 +261,10 @@ std::string SeriesJson(const Series& s) {
     << ", \"point_screened_out_frames\": " << screened_out
     << ", \"point_warm_frames\": " << warm_started
     << ", \"cpu_ms_point_median\": " << Num(Quantile(cpu_p, 0.5))
-    << ", \"lamp_position_error_m_median\": " << Num(Quantile(lamp_err, 0.5)) << "}";
+    << ", \"lamp_position_error_m_median\": " << Num(Quantile(lamp_err, 0.5))
+    << ", \"shadow_accepted_frames\": " << shadow_accepted
+    << ", \"shadow_dir_error_deg_median\": " << Num(Quantile(shadow_dir, 0.5))
+    << ", \"cpu_ms_shadow_median\": " << Num(Quantile(cpu_s, 0.5)) << "}";
   return o.str();
 }
 
@@ -320,21 +350,34 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
   s.cpu_ms_transfer = CpuMs() - c0;
   const double c1 = ThreadCpuMs();
   light::LightEstimate e;
+  light::ShadowEstimate shadow;
   if (temporal != nullptr) {
     e = temporal->Estimate(t, grey, v.estimate, colour, rotation, reliability);
   } else if (v.scene.model == light::LightModel::kDistant) {
     e = light::EstimateLight(t, grey, v.estimate, colour, reliability);
+    if (v.scene.shadow.enabled && e.valid) {
+      const double c_shadow = CpuMs();
+      shadow = light::RefineLightWithShadows(g, grey, v.scene.shadow, colour, &e);
+      s.cpu_ms_shadow = CpuMs() - c_shadow;
+    }
   } else {
     light::EstimateLight(t, grey, v.estimate, colour);  // timed alone for cpu_ms_point
     const double c_distant = ThreadCpuMs() - c1;
     const double c2 = ThreadCpuMs();
+    // The shadow refinement is EstimateSceneLight's (the distant model chosen), timed apart.
+    light::SceneLightOptions scene = v.scene;
+    scene.shadow.enabled = false;
     t1 = Clock::now();  // the wall time, like the CPU time, is EstimateSceneLight's alone
-    const light::SceneLightResult r =
-        light::EstimateSceneLight(g, t, grey, v.scene, colour, tracker);
+    const light::SceneLightResult r = light::EstimateSceneLight(g, t, grey, scene, colour, tracker);
     const double c_scene = ThreadCpuMs() - c2;
     s.cpu_ms_point = std::max(0.0, c_scene - c_distant);
     s.cpu_ms_estimate = c_scene;  // EstimateSceneLight alone (it runs EstimateLight itself)
     e = r.light;
+    if (v.scene.shadow.enabled && r.used == light::LightModel::kDistant && e.valid) {
+      const double c_shadow = CpuMs();
+      shadow = light::RefineLightWithShadows(g, grey, v.scene.shadow, colour, &e);
+      s.cpu_ms_shadow = CpuMs() - c_shadow;
+    }
     s.point_chosen = r.used == light::LightModel::kPoint;
     if (r.point.median_residual_distant > 0) {
       s.point_gain = 1 - r.point.median_residual_point / r.point.median_residual_distant;
@@ -370,6 +413,23 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
   };
   s.dir_error_deg = angle(truth.dominant_direction);
+  if (v.scene.shadow.enabled && shadow.evaluations > 0) {
+    const float* d = truth.dominant_direction;
+    if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
+      const double dot =
+          shadow.direction[0] * d[0] + shadow.direction[1] * d[1] + shadow.direction[2] * d[2];
+      s.shadow_dir_error_deg = std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+    }
+    s.shadow_valid = shadow.valid;
+    s.shadow_score = shadow.score;
+    s.shadow_unshadowed = shadow.score_unshadowed;
+    s.shadow_contrast = shadow.contrast;
+    s.shadow_runner_up = shadow.runner_up;
+    if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
+      s.shadow_truth_score =
+          light::ShadowScore(g, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+    }
+  }
   for (int k = 0; k < 3; ++k) {
     s.truth_dir[k] = truth.dominant_direction[k];
     if (e.valid) s.estimate_dir[k] = e.dominant_direction[k];
@@ -622,7 +682,45 @@ int Run(int argc, char** argv) {
       } catch (const light::LightError&) {
         throw node::UsageError("--light-model must be distant, point or auto, got '" + v + "'");
       }
-    } else if (a == "--lamps")
+    } else if (a == "--no-shadows")
+      o.shadows = false;
+    else if (a == "--shadows")
+      o.shadows = true;
+    else if (a == "--fast-shadows")
+      o.fast_shadows = true;
+    else if (a == "--shadow-stride")
+      o.shadow.stride = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-directions")
+      o.shadow.coarse_directions = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-min-score")
+      o.shadow.min_score = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-min-gain")
+      o.shadow.min_gain = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-keep")
+      o.shadow.keep_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-min-contrast")
+      o.shadow.min_contrast = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-behind-lit")
+      o.shadow.unknown_behind = false;
+    else if (a == "--shadow-steps")
+      o.shadow.march_steps = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-thickness-steps")
+      o.shadow.thickness_steps = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-candidates")
+      o.shadow.candidates = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-coarse-stride")
+      o.shadow.coarse_stride = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-max-runner-up")
+      o.shadow.max_runner_up = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-bias")
+      o.shadow.depth_bias_m = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-bias-rel")
+      o.shadow.depth_bias_rel = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-thickness")
+      o.shadow.thickness_m = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-chroma")
+      o.shadow.chroma_cells = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--lamps")
       o.lamps = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--point-rows")
       o.point_rows = static_cast<int>(node::ParseNumberOption(a, value()));
@@ -713,6 +811,9 @@ int Run(int argc, char** argv) {
     v->scene.model = o.light_model;
     v->scene.distant = eo;
     v->scene.point.max_lamps = o.lamps;
+    v->scene.shadow = o.shadow;
+    // OursFast keeps its 15 ms budget: shadows only with --fast-shadows (as the node's default).
+    v->scene.shadow.enabled = o.shadows && (v == &full || o.fast_shadows);
     if (o.point_rows > 0) v->scene.point.max_rows = o.point_rows;
     if (o.screen_rows >= 0) v->scene.point.screen_rows = o.screen_rows;
     if (o.screen_lm > 0) v->scene.point.screen_lm_iterations = o.screen_lm;
@@ -1037,6 +1138,17 @@ int Run(int argc, char** argv) {
             "\n  direction truth (%.2f %.2f %.2f) clean (%.2f %.2f %.2f) sensor (%.2f %.2f %.2f)",
             c.truth_dir[0], c.truth_dir[1], c.truth_dir[2], c.estimate_dir[0], c.estimate_dir[1],
             c.estimate_dir[2], n.estimate_dir[0], n.estimate_dir[1], n.estimate_dir[2]);
+        if (o.shadows) {
+          for (const Sample* x : {&c, &n}) {
+            std::fprintf(stderr,
+                         "\n  shadows %s: %s score %.3f unshadowed %.3f contrast %.2f, shadow dir "
+                         "%.1f deg off, %.1f ms, score at truth %.3f, runner-up %.3f",
+                         x == &c ? "clean" : "sensor", x->shadow_valid ? "accepted" : "rejected",
+                         x->shadow_score, x->shadow_unshadowed, x->shadow_contrast,
+                         x->shadow_dir_error_deg, x->cpu_ms_shadow, x->shadow_truth_score,
+                         x->shadow_runner_up);
+          }
+        }
         if (o.light_model != light::LightModel::kDistant) {
           std::fprintf(stderr,
                        "\n  point model: clean %s%s (screen %.2f / %.1f deg; gain %.2f, spread "
@@ -1135,6 +1247,7 @@ int Run(int argc, char** argv) {
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")
       << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin << ",\n  \"light_model\": \""
       << light::LightModelName(o.light_model) << "\",\n  \"lamps\": " << o.lamps
+      << ",\n  \"shadows\": " << (o.shadows ? "true" : "false")
       << ",\n  \"temporal_frames\": " << o.temporal << ",\n  \"forgetting\": " << Num(o.forgetting)
       << ",\n  \"normal_filter\": "
       << (o.normal_filter

@@ -928,8 +928,15 @@ SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult&
   out.distant = EstimateLight(transfer, intensity, options.distant, colour);
   out.light = out.distant;
   out.used = LightModel::kDistant;
+  // Cast shadows refine the distant light only (parallel shadow rays); `distant` stays the fit's.
+  auto shadows = [&] {
+    if (options.shadow.enabled && out.used == LightModel::kDistant && out.light.valid) {
+      out.shadow = RefineLightWithShadows(g, intensity, options.shadow, colour, &out.light);
+    }
+  };
   if (options.model == LightModel::kDistant || !out.distant.valid) {
     if (tracker != nullptr) tracker->Reset();
+    shadows();
     return out;
   }
   const int bands = options.distant.bands > 0
@@ -948,6 +955,7 @@ SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult&
     out.light = out.point.light;
     out.used = LightModel::kPoint;
   }
+  shadows();
   return out;
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "probeless/light/estimate.h"
+#include "probeless/light/shadow.h"
 #include "probeless/light/transfer.h"
 
 namespace probeless::light {
@@ -151,6 +152,9 @@ struct SceneLightOptions {
   LightModel model = LightModel::kAuto;
   EstimateOptions distant;
   PointLightOptions point;
+  // Cast shadows (shadow.h; on by default): when the distant model is chosen, its direction is
+  // refined by RefineLightWithShadows (`light`; `distant` stays EstimateLight's).
+  ShadowOptions shadow;
 };
 
 struct SceneLightResult {
@@ -158,6 +162,7 @@ struct SceneLightResult {
   LightModel used = LightModel::kDistant;  // kDistant or kPoint
   LightEstimate distant;                   // EstimateLight's
   PointLightEstimate point;                // valid only if the point model ran (model != kDistant)
+  ShadowEstimate shadow;                   // valid only if shadow.enabled found a direction
 };
 
 // EstimateLight, then (model kPoint / kAuto, and the distant fit had enough pixels) the point fit

@@ -1,0 +1,463 @@
+// Light direction from cast shadows (docs/light.md, "Cast shadows"; shadow.h).
+#include "probeless/light/shadow.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <string>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include "parallel.h"
+
+namespace probeless::light {
+namespace {
+
+struct Point {
+  float x, y, z;     // camera frame, metres
+  float nx, ny, nz;  // unit normal
+  float intensity;   // linear grey
+  int group;         // compact group index
+};
+
+struct PointSet {
+  std::vector<Point> points;
+  int groups = 0;
+  std::vector<double> sum_i, sum_ii;  // per group, independent of the direction
+  std::vector<int> count;
+};
+
+float SrgbToLinear(uint8_t v) {
+  const float c = v / 255.0f;
+  return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+}
+
+// Cube-map face x 3 x 3 cells of a unit normal (54 bins).
+int NormalBin(float nx, float ny, float nz) {
+  const float ax = std::abs(nx), ay = std::abs(ny), az = std::abs(nz);
+  int face;
+  float a, b, m;
+  if (ax >= ay && ax >= az) {
+    face = nx > 0 ? 0 : 1, a = ny, b = nz, m = ax;
+  } else if (ay >= az) {
+    face = ny > 0 ? 2 : 3, a = nx, b = nz, m = ay;
+  } else {
+    face = nz > 0 ? 4 : 5, a = nx, b = ny, m = az;
+  }
+  const int ia = std::clamp(static_cast<int>((a / m + 1) * 1.5f), 0, 2);
+  const int ib = std::clamp(static_cast<int>((b / m + 1) * 1.5f), 0, 2);
+  return face * 9 + ia * 3 + ib;
+}
+
+PointSet CollectPoints(const GeometryView& g, std::span<const float> intensity,
+                       std::span<const uint8_t> colour, int stride, const ShadowOptions& o) {
+  std::vector<float> lut(256);
+  for (int v = 0; v < 256; ++v) lut[v] = SrgbToLinear(static_cast<uint8_t>(v));
+  const bool chroma = !colour.empty() && o.chroma_cells > 0;
+  std::vector<Point> raw;
+  std::vector<int> keys;
+  for (int v = stride / 2; v < g.height; v += stride) {
+    for (int u = stride / 2; u < g.width; u += stride) {
+      const size_t i = static_cast<size_t>(v) * g.width + u;
+      const float z = g.depth[i];
+      const float* n = &g.normals[3 * i];
+      const float in = intensity[i];
+      if (!(z > 0) || !std::isfinite(in) || (n[0] == 0 && n[1] == 0 && n[2] == 0)) continue;
+      Point p;
+      p.z = z;
+      p.x = static_cast<float>((u - g.intrinsics.cx) / g.intrinsics.fx) * z;
+      p.y = static_cast<float>((v - g.intrinsics.cy) / g.intrinsics.fy) * z;
+      p.nx = n[0], p.ny = n[1], p.nz = n[2];
+      p.intensity = std::clamp(in, 0.0f, 1.0f);
+      int key = NormalBin(n[0], n[1], n[2]);
+      if (chroma) {
+        const float r = lut[colour[3 * i]], gg = lut[colour[3 * i + 1]], b = lut[colour[3 * i + 2]];
+        const float s = r + gg + b;
+        int cr = 0, cg = 0;
+        if (s > 1e-4f) {
+          cr = std::min(o.chroma_cells - 1, static_cast<int>(r / s * o.chroma_cells));
+          cg = std::min(o.chroma_cells - 1, static_cast<int>(gg / s * o.chroma_cells));
+        }
+        key += 54 * (cr * o.chroma_cells + cg);
+      }
+      raw.push_back(p);
+      keys.push_back(key);
+    }
+  }
+  std::unordered_map<int, int> sizes;
+  for (int k : keys) ++sizes[k];
+  // Compact indices in order of first appearance (deterministic).
+  std::unordered_map<int, int> index;
+  PointSet set;
+  for (size_t j = 0; j < raw.size(); ++j) {
+    if (sizes[keys[j]] < o.min_group_points) continue;
+    auto [it, inserted] = index.emplace(keys[j], set.groups);
+    if (inserted) ++set.groups;
+    raw[j].group = it->second;
+    set.points.push_back(raw[j]);
+  }
+  set.sum_i.assign(set.groups, 0);
+  set.sum_ii.assign(set.groups, 0);
+  set.count.assign(set.groups, 0);
+  for (const Point& p : set.points) {
+    set.sum_i[p.group] += p.intensity;
+    set.sum_ii[p.group] += static_cast<double>(p.intensity) * p.intensity;
+    ++set.count[p.group];
+  }
+  return set;
+}
+
+class Scorer {
+ public:
+  Scorer(const GeometryView& g, const ShadowOptions& o) : g_(g), o_(o) {
+    const double q =
+        std::pow(o.march_max_m / o.march_start_m, 1.0 / std::max(1, o.march_steps - 1));
+    double t = o.march_start_m, prev = 0;
+    for (int k = 0; k < o.march_steps; ++k) {
+      steps_.push_back(static_cast<float>(t));
+      thick_.push_back(std::max(o.thickness_m, o.thickness_steps * static_cast<float>(t - prev)));
+      prev = t;
+      t *= q;
+    }
+  }
+
+  // 1 if the point sees the light along l (screen-space shadow ray), 0 if occluded, -1 if
+  // unknown (with unknown_behind: the ray passed behind a surface by more than its thickness
+  // and hit nothing).
+  float Visible(const Point& p, const Vec3f& l) const {
+    bool hidden = false;
+    // u(t) = (au + t bu) / (p.z + t l_z): the projection of p + t l (pixel centres at integers).
+    const float fx = static_cast<float>(g_.intrinsics.fx),
+                fy = static_cast<float>(g_.intrinsics.fy);
+    const float cx = static_cast<float>(g_.intrinsics.cx),
+                cy = static_cast<float>(g_.intrinsics.cy);
+    const float au = fx * p.x + cx * p.z + 0.5f, bu = fx * l[0] + cx * l[2];
+    const float av = fy * p.y + cy * p.z + 0.5f, bv = fy * l[1] + cy * l[2];
+    const float* depth = g_.depth.data();
+    const int w = g_.width, h = g_.height;
+    const float bias0 = o_.depth_bias_m, bias_rel = o_.depth_bias_rel;
+    const int n = static_cast<int>(steps_.size());
+    for (int k = 0; k < n; ++k) {
+      const float t = steps_[k];
+      const float sz = p.z + t * l[2];
+      if (sz < 0.05f) break;
+      const float inv = 1.0f / sz;
+      const float u = (au + t * bu) * inv, v = (av + t * bv) * inv;  // + 0.5: rounding by floor
+      if (!(u >= 0 && v >= 0 && u < w && v < h)) break;
+      const float d = depth[static_cast<int>(v) * w + static_cast<int>(u)];
+      if (d > 0 && sz - d > bias0 + bias_rel * sz) {
+        if (sz - d < thick_[k]) return 0;
+        hidden = true;
+      }
+    }
+    return hidden && o_.unknown_behind ? -1.0f : 1.0f;
+  }
+
+  // The explained fraction of the within-group variance (shadow.h), with or without shadows.
+  float Score(const PointSet& s, const Vec3f& l, bool shadows) const {
+    std::vector<double> sp(s.groups, 0), spp(s.groups, 0), sip(s.groups, 0);
+    std::vector<double> si(s.sum_i), sii(s.sum_ii);
+    std::vector<int> count(s.count);
+    for (const Point& p : s.points) {
+      const float c = p.nx * l[0] + p.ny * l[1] + p.nz * l[2];
+      if (c <= 0) continue;  // p = 0: adds nothing to the sums below
+      const float v = shadows ? Visible(p, l) : 1.0f;
+      if (v < 0) {  // unknown: out of this direction's fit
+        si[p.group] -= p.intensity;
+        sii[p.group] -= static_cast<double>(p.intensity) * p.intensity;
+        --count[p.group];
+        continue;
+      }
+      const float x = c * v;
+      sp[p.group] += x;
+      spp[p.group] += static_cast<double>(x) * x;
+      sip[p.group] += static_cast<double>(x) * p.intensity;
+    }
+    // The denominator is over all points: leaving unknown points out must not raise the score.
+    double explained = 0, total = 0;
+    for (int gi = 0; gi < s.groups; ++gi) {
+      const double n_all = s.count[gi];
+      total += std::max(0.0, s.sum_ii[gi] - s.sum_i[gi] * s.sum_i[gi] / n_all);
+      const double n = count[gi];
+      if (n < 2) continue;
+      const double syy = sii[gi] - si[gi] * si[gi] / n;
+      const double sxx = spp[gi] - sp[gi] * sp[gi] / n;
+      const double sxy = sip[gi] - sp[gi] * si[gi] / n;
+      if (sxy > 0 && sxx > 1e-9 * n) explained += std::min(sxy * sxy / sxx, std::max(0.0, syy));
+    }
+    return total > 0 ? static_cast<float>(explained / total) : 0.0f;
+  }
+
+  // Lit / shadowed contrast under l: exp of the mean over groups (weighted by the smaller side's
+  // point count) of log(mean lit intensity / mean shadowed intensity), over front-facing points;
+  // 1 when no group has at least 3 points on each side.
+  float Contrast(const PointSet& s, const Vec3f& l) const {
+    std::vector<double> lit(s.groups, 0), dark(s.groups, 0);
+    std::vector<int> n_lit(s.groups, 0), n_dark(s.groups, 0);
+    for (const Point& p : s.points) {
+      const float c = p.nx * l[0] + p.ny * l[1] + p.nz * l[2];
+      if (c <= 0.1f) continue;
+      const float v = Visible(p, l);
+      if (v < 0) continue;
+      if (v > 0) {
+        lit[p.group] += p.intensity, ++n_lit[p.group];
+      } else {
+        dark[p.group] += p.intensity, ++n_dark[p.group];
+      }
+    }
+    double sum = 0, weight = 0;
+    for (int gi = 0; gi < s.groups; ++gi) {
+      if (n_lit[gi] < 3 || n_dark[gi] < 3) continue;
+      const double a = lit[gi] / n_lit[gi], b = dark[gi] / n_dark[gi];
+      if (!(a > 0) || !(b > 0)) continue;
+      const double w = std::min(n_lit[gi], n_dark[gi]);
+      sum += w * std::log(a / b);
+      weight += w;
+    }
+    return weight > 0 ? static_cast<float>(std::exp(sum / weight)) : 1.0f;
+  }
+
+ private:
+  const GeometryView& g_;
+  const ShadowOptions& o_;
+  std::vector<float> steps_, thick_;
+};
+
+Vec3f Normalised(double x, double y, double z) {
+  const double n = std::sqrt(x * x + y * y + z * z);
+  return {static_cast<float>(x / n), static_cast<float>(y / n), static_cast<float>(z / n)};
+}
+
+float Dot(const Vec3f& a, const Vec3f& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// Scores all directions (in parallel; each score is computed by one thread alone).
+std::vector<float> ScoreAll(const Scorer& scorer, const PointSet& s, const std::vector<Vec3f>& dirs,
+                            int threads) {
+  std::vector<float> out(dirs.size());
+  internal::ParallelRows(threads, static_cast<int>(dirs.size()), 1, [&](int b, int e) {
+    for (int j = b; j < e; ++j) out[j] = scorer.Score(s, dirs[j], true);
+  });
+  return out;
+}
+
+void Check(const GeometryView& g, std::span<const float> intensity, std::span<const uint8_t> colour,
+           const ShadowOptions& o) {
+  const std::string f = "light::EstimateShadowDirection: ";
+  const size_t n = static_cast<size_t>(std::max(0, g.width)) * std::max(0, g.height);
+  if (g.width <= 0 || g.height <= 0) throw LightError(f + "empty geometry");
+  if (g.depth.size() != n) {
+    throw LightError(f + "depth has " + std::to_string(g.depth.size()) + " values, expected " +
+                     std::to_string(g.width) + "x" + std::to_string(g.height));
+  }
+  if (g.normals.size() != 3 * n) throw LightError(f + "missing normals");
+  if (intensity.size() != n) {
+    throw LightError(f + "intensity has " + std::to_string(intensity.size()) +
+                     " values, expected " + std::to_string(n));
+  }
+  if (!colour.empty() && colour.size() != 3 * n) {
+    throw LightError(f + "colour has " + std::to_string(colour.size()) + " bytes, expected " +
+                     std::to_string(3 * n));
+  }
+  const Intrinsics& k = g.intrinsics;
+  if (!std::isfinite(k.fx) || !std::isfinite(k.fy) || !std::isfinite(k.cx) ||
+      !std::isfinite(k.cy) || k.fx <= 0 || k.fy <= 0) {
+    throw LightError(f + "non-finite intrinsics");
+  }
+  const std::pair<bool, const char*> rules[] = {
+      {o.coarse_stride >= 1 && o.stride >= 1, "strides must be >= 1"},
+      {o.coarse_directions >= 16 && o.coarse_directions <= 1024,
+       "coarse_directions must be in 16..1024"},
+      {o.candidates >= 1, "candidates must be >= 1"},
+      {o.refine_levels >= 0 && o.refine_start_deg > 0,
+       "refine_levels must be >= 0 and refine_start_deg > 0"},
+      {o.march_steps >= 1 && o.march_start_m > 0 && o.march_max_m > o.march_start_m,
+       "march_steps must be >= 1 and 0 < march_start_m < march_max_m"},
+      {o.chroma_cells >= 0 && o.min_group_points >= 2,
+       "chroma_cells must be >= 0 and min_group_points >= 2"},
+      {o.threads >= 1, "threads must be >= 1"},
+  };
+  for (const auto& [ok, message] : rules) {
+    if (!ok) throw LightError(f + message);
+  }
+}
+
+}  // namespace
+
+ShadowEstimate EstimateShadowDirection(const GeometryView& g, std::span<const float> intensity,
+                                       const ShadowOptions& o, std::span<const uint8_t> colour,
+                                       const Vec3f* initial) {
+  Check(g, intensity, colour, o);
+  ShadowEstimate out;
+  const Scorer scorer(g, o);
+  // Global pass: Fibonacci directions over the sphere (+ the initial direction).
+  const PointSet coarse = CollectPoints(g, intensity, colour, o.coarse_stride, o);
+  if (coarse.groups == 0) return out;
+  std::vector<Vec3f> dirs;
+  const double golden = std::numbers::pi * (3 - std::sqrt(5.0));
+  for (int j = 0; j < o.coarse_directions; ++j) {
+    const double z = 1 - (2 * j + 1.0) / o.coarse_directions;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    dirs.push_back(Normalised(r * std::cos(golden * j), r * std::sin(golden * j), z));
+  }
+  if (initial != nullptr && Dot(*initial, *initial) > 0.5f) dirs.push_back(*initial);
+  const std::vector<float> scores = ScoreAll(scorer, coarse, dirs, o.threads);
+  out.evaluations += static_cast<int>(dirs.size());
+  std::vector<int> order(dirs.size());
+  for (size_t j = 0; j < order.size(); ++j) order[j] = static_cast<int>(j);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return scores[a] > scores[b]; });
+  std::vector<Vec3f> seeds;
+  for (int j : order) {
+    if (static_cast<int>(seeds.size()) >= o.candidates) break;
+    bool apart = true;
+    for (const Vec3f& s : seeds)
+      apart = apart && Dot(s, dirs[j]) < std::cos(20 * std::numbers::pi / 180);
+    if (apart) seeds.push_back(dirs[j]);
+  }
+  // Refinement: a 3 x 3 pattern in the tangent plane, step halved per level.
+  const PointSet fine = CollectPoints(g, intensity, colour, o.stride, o);
+  out.points = static_cast<int>(fine.points.size());
+  out.groups = fine.groups;
+  if (fine.groups == 0) return out;
+  float best_score = -1, runner_up = -1;
+  Vec3f best{0, 0, 1};
+  std::vector<std::pair<Vec3f, float>> refined;
+  for (const Vec3f& seed : seeds) {
+    Vec3f d = seed;
+    float s = ScoreAll(scorer, fine, {d}, 1)[0];
+    ++out.evaluations;
+    double step = o.refine_start_deg * std::numbers::pi / 180;
+    for (int level = 0; level < o.refine_levels; ++level, step *= 0.5) {
+      // Tangent basis at d.
+      const Vec3f a = std::abs(d[0]) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+      Vec3f e1 = Normalised(a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2],
+                            a[0] * d[1] - a[1] * d[0]);
+      Vec3f e2 = Normalised(d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
+                            d[0] * e1[1] - d[1] * e1[0]);
+      std::vector<Vec3f> ring;
+      for (int i = -1; i <= 1; ++i) {
+        for (int j = -1; j <= 1; ++j) {
+          if (i == 0 && j == 0) continue;
+          if (i != 0 && j != 0) continue;  // compass search: 4 neighbours
+          const double ti = std::tan(i * step), tj = std::tan(j * step);
+          ring.push_back(Normalised(d[0] + ti * e1[0] + tj * e2[0], d[1] + ti * e1[1] + tj * e2[1],
+                                    d[2] + ti * e1[2] + tj * e2[2]));
+        }
+      }
+      const std::vector<float> rs = ScoreAll(scorer, fine, ring, o.threads);
+      out.evaluations += static_cast<int>(ring.size());
+      for (size_t j = 0; j < ring.size(); ++j) {
+        if (rs[j] > s) s = rs[j], d = ring[j];
+      }
+    }
+    refined.push_back({d, s});
+    if (s > best_score) best_score = s, best = d;
+  }
+  // Runner-up: the best refined candidate that did not converge to the best direction.
+  for (const auto& [d, s] : refined) {
+    if (Dot(d, best) < std::cos(20 * std::numbers::pi / 180)) runner_up = std::max(runner_up, s);
+  }
+  out.score = best_score;
+  out.runner_up = std::max(0.0f, runner_up);
+  out.score_unshadowed = scorer.Score(fine, best, false);
+  out.contrast = scorer.Contrast(fine, best);
+  out.valid = out.score >= o.min_score && out.score - out.score_unshadowed >= o.min_gain &&
+              out.contrast >= o.min_contrast && out.runner_up <= o.max_runner_up * out.score;
+  out.direction = best;
+  // The direction closest to `initial` on the arc towards `best` that explains the shadows
+  // nearly as well (score >= keep_ratio x best): the shadows correct the initial direction only
+  // as far as they contradict it.
+  if (out.valid && initial != nullptr && Dot(*initial, *initial) > 0.5f && o.keep_ratio > 0) {
+    const Vec3f from = Normalised((*initial)[0], (*initial)[1], (*initial)[2]);
+    auto along = [&](double f) {  // slerp-like: normalised linear blend (angles < 180 deg)
+      return Normalised(from[0] + f * (best[0] - from[0]), from[1] + f * (best[1] - from[1]),
+                        from[2] + f * (best[2] - from[2]));
+    };
+    const float need = o.keep_ratio * best_score;
+    if (Dot(from, best) > -0.9f) {
+      if (scorer.Score(fine, from, true) >= need) {
+        out.direction = from;
+      } else {
+        double lo = 0, hi = 1;  // score(along(hi)) >= need
+        for (int it = 0; it < 5; ++it) {
+          const double mid = 0.5 * (lo + hi);
+          (scorer.Score(fine, along(mid), true) >= need ? hi : lo) = mid;
+        }
+        out.direction = along(hi);
+        out.evaluations += 5;
+      }
+      ++out.evaluations;
+    }
+  }
+  return out;
+}
+
+float ShadowScore(const GeometryView& g, std::span<const float> intensity,
+                  const ShadowOptions& options, std::span<const uint8_t> colour,
+                  const Vec3f& direction, bool shadows) {
+  Check(g, intensity, colour, options);
+  const Scorer scorer(g, options);
+  const PointSet set = CollectPoints(g, intensity, colour, options.stride, options);
+  return scorer.Score(set, Normalised(direction[0], direction[1], direction[2]), shadows);
+}
+
+void RotateLightTo(const Vec3f& direction, LightEstimate* light) {
+  if (light == nullptr || !light->valid) return;
+  const Vec3f to = Normalised(direction[0], direction[1], direction[2]);
+  const Vec3f& from = light->dominant_direction;
+  if (Dot(from, from) < 0.5f || light->bands < 1) {
+    light->dominant_direction = to;
+    return;
+  }
+  // R maps `to` onto `from` (ShRotationMatrix: l = A l' is the function f(d) = f'(R d), whose
+  // peak moves from `from` to R^T from = `to`). Rodrigues with axis to x from.
+  const Vec3f f = Normalised(from[0], from[1], from[2]);
+  const double c = Dot(to, f);
+  double ax = to[1] * f[2] - to[2] * f[1], ay = to[2] * f[0] - to[0] * f[2],
+         az = to[0] * f[1] - to[1] * f[0];
+  const double s = std::sqrt(ax * ax + ay * ay + az * az);
+  std::array<float, 9> r{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  if (s > 1e-7) {
+    ax /= s, ay /= s, az /= s;
+    const double k[9] = {0, -az, ay, az, 0, -ax, -ay, ax, 0};
+    double k2[9];
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        k2[3 * i + j] = 0;
+        for (int m = 0; m < 3; ++m) k2[3 * i + j] += k[3 * i + m] * k[3 * m + j];
+      }
+    }
+    for (int i = 0; i < 9; ++i) r[i] = static_cast<float>(r[i] + s * k[i] + (1 - c) * k2[i]);
+  } else if (c < 0) {
+    // Opposite: 180 degrees about any axis perpendicular to `to`.
+    const Vec3f a = std::abs(to[0]) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+    const Vec3f p = Normalised(a[1] * to[2] - a[2] * to[1], a[2] * to[0] - a[0] * to[2],
+                               a[0] * to[1] - a[1] * to[0]);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) r[3 * i + j] = 2 * p[i] * p[j] - (i == j ? 1.0f : 0.0f);
+    }
+  }
+  std::vector<double> a;
+  ShRotationMatrix(r.data(), light->bands, &a);
+  const size_t n = light->coefficients.size();
+  std::vector<double> rotated(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t j = 0; j < n; ++j) rotated[i] += a[i * n + j] * light->coefficients[j];
+  }
+  light->coefficients = rotated;
+  light->dominant_direction = to;
+}
+
+ShadowEstimate RefineLightWithShadows(const GeometryView& g, std::span<const float> intensity,
+                                      const ShadowOptions& options, std::span<const uint8_t> colour,
+                                      LightEstimate* light) {
+  const bool seeded = light != nullptr && light->valid &&
+                      Dot(light->dominant_direction, light->dominant_direction) > 0.5f;
+  ShadowEstimate s = EstimateShadowDirection(g, intensity, options, colour,
+                                             seeded ? &light->dominant_direction : nullptr);
+  if (s.valid && light != nullptr) RotateLightTo(s.direction, light);
+  return s;
+}
+
+}  // namespace probeless::light
