@@ -171,8 +171,11 @@ void NormalsWithReliability(std::span<const float> depth, int width, int height,
         }
         constexpr float kNone = 1e30f;
         const float c = d[1] > 0 && d[3] > 0 ? std::abs(d[1] - 2 * d[2] + d[3]) : kNone;
-        const float l = d[1] > 0 ? (d[0] > 0 ? std::abs(d[0] - 2 * d[1] + d[2]) : 0.0f) : kNone;
-        const float r = d[3] > 0 ? (d[4] > 0 ? std::abs(d[2] - 2 * d[3] + d[4]) : 0.0f) : kNone;
+        // A one-sided difference without its third sample (a hole or the border beyond) has no
+        // continuity evidence: it counts as at the allowance (reliability 0.5 at most), not as
+        // exact.
+        const float l = d[1] > 0 ? (d[0] > 0 ? std::abs(d[0] - 2 * d[1] + d[2]) : allowed) : kNone;
+        const float r = d[3] > 0 ? (d[4] > 0 ? std::abs(d[2] - 2 * d[3] + d[4]) : allowed) : kNone;
         int a, b;  // the two samples (offsets in steps) of the chosen difference
         float residual;
         if (c <= allowed) {

@@ -55,7 +55,8 @@ void NormalReliability(std::span<const float> depth, int width, int height,
 // normals next to a depth edge or a crease come from the pixel's own surface. The reliability is
 // 1 / (1 + r^4), r the largest ratio of the chosen difference's second difference to that
 // allowance over the two axes (1 on planes and spheres larger than min_radius_m, 0.5 at the
-// threshold), 0 beyond max_view_angle_deg or without a normal.
+// threshold; a one-sided difference whose third sample is missing — a hole or the border — counts
+// as at the threshold), 0 beyond max_view_angle_deg or without a normal.
 struct DepthNormalOptions {
   int step = 1;  // pixels between the samples (>= 1)
   // sigma(z) = noise_m + noise_quadratic * z^2, the depth's noise (metres); the default: mm depth16
