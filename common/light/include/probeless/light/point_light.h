@@ -82,7 +82,8 @@ struct PointLightOptions {
 // every frame; EstimatePointLight / EstimateSceneLight fill it after a point fit that is used
 // (valid, and preferred when selecting) and reset it otherwise, so a stream that turns distant
 // starts cold again. Positions in the camera frame of that frame (metres): the camera's motion
-// between frames is left to the fit.
+// between frames is left to the fit. The warm start seeds the strongest lamp only; with max_lamps 2
+// the second lamp is searched cold every frame.
 struct PointLightTracker {
   std::vector<float> position;   // 3 per lamp, strongest first; empty = no lamp (cold start)
   std::vector<float> intensity;  // per lamp (PointLamp::intensity)
