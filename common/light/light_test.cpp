@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <functional>
 #include <numbers>
 #include <random>
 #include <string>
@@ -16,20 +15,14 @@
 #include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/sh/sh.h"
+#include "probeless/testing/testing.h"
 
 namespace {
 
 using namespace probeless;
 using light::Vec3f;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+using probeless::testing::ErrorOf;
 
 // An analytic scene seen by a 160x120 camera (fx = fy = 120): kPlane, a wall at z = 3 m facing
 // the camera; kFloor, that wall and a floor 0.5 m below the camera (y = +0.5, normal -y); kValley,

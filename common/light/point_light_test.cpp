@@ -8,24 +8,18 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <functional>
 #include <numbers>
 #include <string>
 #include <utility>
+
+#include "probeless/testing/testing.h"
 
 namespace {
 
 using namespace probeless;
 using light::Vec3f;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
+using probeless::testing::ErrorOf;
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kY0 = 0.28209479177387814;

@@ -14,6 +14,7 @@
 
 #include "probeless/light/point_light.h"
 #include "probeless/sh/sh.h"
+#include "probeless/testing/testing.h"
 
 namespace probeless::light {
 namespace {
@@ -269,29 +270,18 @@ TEST(Shadow, OneLineErrors) {
   Scene s;
   s.Render(kLight, 1.5, 0.2);
   std::vector<float> short_grey(5, 0.5f);
-  try {
-    EstimateShadowDirection(s.View(), short_grey, ShadowOptions{});
-    FAIL() << "no error";
-  } catch (const LightError& e) {
-    EXPECT_EQ(std::string(e.what()),
-              "light::EstimateShadowDirection: intensity has 5 values, expected 76800");
-  }
+  EXPECT_EQ(probeless::testing::ErrorOf(
+                [&] { EstimateShadowDirection(s.View(), short_grey, ShadowOptions{}); }),
+            "light::EstimateShadowDirection: intensity has 5 values, expected 76800");
   ShadowOptions bad;
   bad.stride = 0;
-  try {
-    EstimateShadowDirection(s.View(), s.grey, bad);
-    FAIL() << "no error";
-  } catch (const LightError& e) {
-    EXPECT_EQ(std::string(e.what()), "light::EstimateShadowDirection: strides must be >= 1");
-  }
+  EXPECT_EQ(probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad); }),
+            "light::EstimateShadowDirection: strides must be >= 1");
   GeometryView nan_k = s.View();
   nan_k.intrinsics.fx = NAN;
-  try {
-    EstimateShadowDirection(nan_k, s.grey, ShadowOptions{});
-    FAIL() << "no error";
-  } catch (const LightError& e) {
-    EXPECT_EQ(std::string(e.what()), "light::EstimateShadowDirection: non-finite intrinsics");
-  }
+  EXPECT_EQ(
+      probeless::testing::ErrorOf([&] { EstimateShadowDirection(nan_k, s.grey, ShadowOptions{}); }),
+      "light::EstimateShadowDirection: non-finite intrinsics");
 }
 
 }  // namespace

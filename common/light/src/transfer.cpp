@@ -498,10 +498,7 @@ void NormalsFromDepth(std::span<const float> depth, int width, int height, const
   }
   normals->assign(3 * depth.size(), 0.0f);
   auto point = [&](int u, int v, float out[3]) {
-    const float z = depth[static_cast<size_t>(v) * width + u];
-    out[0] = z * static_cast<float>((u - k.cx) / k.fx);
-    out[1] = z * static_cast<float>((v - k.cy) / k.fy);
-    out[2] = z;
+    k.BackProject(u, v, depth[static_cast<size_t>(v) * width + u], out);
   };
   for (int v = 0; v < height; ++v) {
     for (int u = 0; u < width; ++u) {

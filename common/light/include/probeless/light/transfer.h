@@ -23,6 +23,13 @@ struct Intrinsics {
   double fy = 0;
   double cx = 0;
   double cy = 0;
+
+  // The camera-frame point (metres; x right, y down, z forward) seen at pixel (u, v) at depth z.
+  void BackProject(int u, int v, float z, float out[3]) const {
+    out[0] = z * static_cast<float>((u - cx) / fx);
+    out[1] = z * static_cast<float>((v - cy) / fy);
+    out[2] = z;
+  }
 };
 
 // The filtered geometry buffer G_r of the current view, in the camera frame (borrowed spans).

@@ -1,6 +1,6 @@
 // Helpers shared by the probeless tests (target probeless_testing, header-only, tests only):
-// a temporary directory per test, whole text files, shell command lines and child processes with
-// their stdout and stderr captured.
+// the message of a thrown exception, a temporary directory per test, whole text files, shell
+// command lines and child processes with their stdout and stderr captured.
 #pragma once
 
 #include <fcntl.h>
@@ -12,6 +12,7 @@
 
 #include <chrono>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -23,6 +24,18 @@
 extern char** environ;
 
 namespace probeless::testing {
+
+// The message of the std::exception `f` throws, "(no error)" if it returns normally: tests assert
+// the one-line messages of bad input with it.
+template <class Fn>
+std::string ErrorOf(Fn&& f) {
+  try {
+    f();
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
 
 // The whole file `path` as text ("" if it cannot be read).
 inline std::string ReadText(const std::filesystem::path& path) {
