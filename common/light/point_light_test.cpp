@@ -124,6 +124,16 @@ struct Scene {
   }
 };
 
+// The SSDO transfer (default options, one thread) of the scene's G-buffer with its colour.
+light::TransferResult TransferOf(const Scene& s) {
+  light::TransferOptions to;
+  to.threads = 1;
+  light::TransferResult t;
+  light::TransferComputer(to).Compute(
+      light::GeometryView{s.w, s.h, s.k, s.depth, s.normals, s.colour}, {}, nullptr, &t);
+  return t;
+}
+
 double AngleDeg(const Vec3f& a, const Vec3f& b) {
   const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
   return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / kPi;
@@ -204,12 +214,8 @@ TEST(PointLight, DistantLightMakesAutoPickDistant) {
 // estimate under a distant light.
 TEST(PointLight, SceneLightSelectsTheModel) {
   const Scene s;
-  light::TransferOptions to;
-  to.threads = 1;
-  light::TransferComputer computer(to);
-  light::TransferResult t;
   const light::GeometryView view{s.w, s.h, s.k, s.depth, s.normals, s.colour};
-  computer.Compute(view, {}, nullptr, &t);
+  const light::TransferResult t = TransferOf(s);
   const double lamp[3] = {-0.5, -0.6, 2.0};
   const std::vector<float> lamp_image = s.LitByLamp(lamp, 3.0, 0.1);
   light::SceneLightOptions o;
@@ -288,12 +294,8 @@ TEST(PointLight, WarmStartConvergesToTheColdLamp) {
 // EstimateLight's estimate, bit for bit the distant model's; the tracker is left empty.
 TEST(PointLight, ScreenKeepsTheDistantResultBitIdentical) {
   const Scene s;
-  light::TransferOptions to;
-  to.threads = 1;
-  light::TransferComputer computer(to);
-  light::TransferResult t;
   const light::GeometryView view{s.w, s.h, s.k, s.depth, s.normals, s.colour};
-  computer.Compute(view, {}, nullptr, &t);
+  const light::TransferResult t = TransferOf(s);
   const double d0[3] = {-0.4, -0.8, -0.3};
   const double len = std::sqrt(d0[0] * d0[0] + d0[1] * d0[1] + d0[2] * d0[2]);
   const double d[3] = {d0[0] / len, d0[1] / len, d0[2] / len};
