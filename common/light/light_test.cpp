@@ -221,6 +221,60 @@ TEST(Transfer, FastKeepsItsSparseSamples) {
   EXPECT_TRUE(r.samples.empty());
 }
 
+// OursFast's upsampling for every coefficient count (16 and 9 have unrolled paths, the others a
+// generic one) and for the indirect channels: interpolating at a sample's own pixel returns it,
+// and the full-resolution T stays within the samples' range elsewhere (Catmull-Rom overshoots a
+// little, never far).
+TEST(Transfer, FastUpsamplingForAllBandCountsAndIndirect) {
+  const Scene scene(Shape::kValley);
+  const float r2 = std::sqrt(0.5f);
+  const light::DominantLight light{{r2, 0, -r2}, 3.0f};
+  for (int bands : {2, 3, 4, 5}) {
+    SCOPED_TRACE("bands " + std::to_string(bands));
+    light::TransferOptions o;
+    o.bands = bands;
+    o.subsample = 4;
+    light::TransferComputer fast(o);
+    light::TransferResult r, sparse_indirect;
+    fast.Compute(scene.View(), {}, &light, &r);
+    const int cc = bands * bands;
+    ASSERT_EQ(r.coefficient_count, cc);
+    ASSERT_EQ(r.indirect.size(), 3u * 160 * 120);
+    // The sparse grid's indirect term: the full variant at the sample pixels (same offsets).
+    light::TransferComputer full({.bands = bands});
+    full.Compute(scene.View(), {}, &light, &sparse_indirect);
+    int checked = 0, bounced = 0;
+    float t0_min = 1e9f, t0_max = -1e9f;
+    for (int j = 0; j < 30; ++j) {
+      for (int i = 0; i < 40; ++i) {
+        const size_t s = static_cast<size_t>(j) * 40 + i;
+        const size_t p = static_cast<size_t>(4 * j + 2) * 160 + (4 * i + 2);
+        if (!r.sample_valid[s]) continue;
+        for (int k = 0; k < cc; ++k) {
+          ASSERT_NEAR(r.samples[s * cc + k], r.transfer[p * cc + k], 1e-5);
+          ASSERT_NEAR(sparse_indirect.transfer[p * cc + k], r.transfer[p * cc + k], 1e-5);
+        }
+        for (int c = 0; c < 3; ++c) {
+          ASSERT_NEAR(sparse_indirect.indirect[3 * p + c], r.indirect[3 * p + c], 1e-5);
+        }
+        bounced += r.indirect[3 * p] > 1e-3f;
+        t0_min = std::min(t0_min, r.samples[s * cc]);
+        t0_max = std::max(t0_max, r.samples[s * cc]);
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 1000);
+    EXPECT_GT(bounced, 10);
+    const float margin = 0.1f * (t0_max - t0_min);
+    for (size_t p = 0; p < r.valid.size(); ++p) {
+      if (!r.valid[p]) continue;
+      ASSERT_GE(r.transfer[p * cc], t0_min - margin) << "pixel " << p;
+      ASSERT_LE(r.transfer[p * cc], t0_max + margin) << "pixel " << p;
+      ASSERT_GE(r.indirect[3 * p], 0.0f);
+    }
+  }
+}
+
 TEST(Transfer, IndirectLightBouncesAcrossTheValley) {
   const Scene scene(Shape::kValley);
   light::TransferComputer computer({});

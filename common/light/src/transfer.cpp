@@ -355,94 +355,109 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
   // Fill invalid low-resolution samples from valid 8-neighbours (3 passes) so that edges do not
   // pull zeros into the interpolation; pixels without a surface are zeroed afterwards.
   const int channels = cc + (light ? 3 : 0);
-  std::vector<float> merged(low * channels);
+  std::vector<float>& merged = low_merged_;
+  merged.resize(low * channels);
   for (size_t i = 0; i < low; ++i) {
     std::copy_n(&low_transfer[i * cc], cc, &merged[i * channels]);
     if (light) std::copy_n(&low_indirect_[3 * i], 3, &merged[i * channels + cc]);
   }
-  std::vector<uint8_t> ok(low_valid.begin(), low_valid.end()), next_ok = ok;
-  for (int pass = 0; pass < 3; ++pass) {
-    for (int y = 0; y < lh; ++y) {
-      for (int x = 0; x < lw; ++x) {
-        const size_t i = static_cast<size_t>(y) * lw + x;
-        if (ok[i]) continue;
-        int count = 0;
-        float* dst = &merged[i * channels];
-        std::fill(dst, dst + channels, 0.0f);
-        for (int dy = -1; dy <= 1; ++dy) {
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int xx = x + dx, yy = y + dy;
-            if (xx < 0 || yy < 0 || xx >= lw || yy >= lh) continue;
-            const size_t k = static_cast<size_t>(yy) * lw + xx;
-            if (!ok[k]) continue;
-            for (int c = 0; c < channels; ++c) dst[c] += merged[k * channels + c];
-            ++count;
-          }
-        }
-        if (count) {
-          for (int c = 0; c < channels; ++c) dst[c] /= count;
-          next_ok[i] = 1;
+  std::vector<uint8_t> ok(low_valid.begin(), low_valid.end());
+  std::vector<size_t> holes, still, filled;
+  for (size_t i = 0; i < low; ++i) {
+    if (!ok[i]) holes.push_back(i);
+  }
+  for (int pass = 0; pass < 3 && !holes.empty(); ++pass) {
+    still.clear();
+    filled.clear();
+    for (size_t i : holes) {
+      const int x = static_cast<int>(i % lw), y = static_cast<int>(i / lw);
+      int count = 0;
+      float* dst = &merged[i * channels];
+      std::fill(dst, dst + channels, 0.0f);
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int xx = x + dx, yy = y + dy;
+          if (xx < 0 || yy < 0 || xx >= lw || yy >= lh) continue;
+          const size_t k = static_cast<size_t>(yy) * lw + xx;
+          if (!ok[k]) continue;
+          for (int c = 0; c < channels; ++c) dst[c] += merged[k * channels + c];
+          ++count;
         }
       }
+      if (count) {
+        for (int c = 0; c < channels; ++c) dst[c] /= count;
+        filled.push_back(i);
+      } else {
+        still.push_back(i);
+      }
     }
-    ok = next_ok;
+    for (size_t i : filled) ok[i] = 1;  // a pass reads only the previous passes' samples
+    holes.swap(still);
   }
-  // Separable bicubic: low sample i sits at full-resolution coordinate i * step + step / 2.
-  auto coord = [&](int x, int n_low, int* i0, float wt[4]) {
+  // Separable bicubic (Catmull-Rom); low sample i sits at full-resolution coordinate
+  // i * step + step / 2. The vertical pass runs first, at the low width (into a per-thread row of
+  // lw samples), so the horizontal pass writes each full-resolution pixel exactly once.
+  auto taps = [&](int x, int n_low, int idx[4], float wt[4]) {
     const float f = (x - step / 2) / static_cast<float>(step);
     const int i = static_cast<int>(std::floor(f));
     CubicWeights(f - i, wt);
-    *i0 = i;
-    (void)n_low;
+    for (int k = 0; k < 4; ++k) idx[k] = std::clamp(i - 1 + k, 0, n_low - 1);
   };
-  std::vector<float> horizontal(static_cast<size_t>(lh) * w * channels);
-  internal::ParallelRows(threads, lh, 8, [&](int begin, int end) {
-    for (int y = begin; y < end; ++y) {
-      for (int x = 0; x < w; ++x) {
-        int i0;
-        float wt[4];
-        coord(x, lw, &i0, wt);
-        float* dst = &horizontal[(static_cast<size_t>(y) * w + x) * channels];
-        std::fill(dst, dst + channels, 0.0f);
-        for (int k = 0; k < 4; ++k) {
-          const int xi = std::clamp(i0 - 1 + k, 0, lw - 1);
-          const float* src = &merged[(static_cast<size_t>(y) * lw + xi) * channels];
-          for (int c = 0; c < channels; ++c) dst[c] += wt[k] * src[c];
-        }
-      }
-    }
-  });
+  std::vector<int> x_idx(4 * static_cast<size_t>(w));
+  std::vector<float> x_wt(4 * static_cast<size_t>(w));
+  for (int x = 0; x < w; ++x) taps(x, lw, &x_idx[4 * x], &x_wt[4 * x]);
+  const size_t row_len = static_cast<size_t>(lw) * channels;
   internal::ParallelRows(threads, h, 16, [&](int begin, int end) {
-    float acc[kMaxDirections];
+    std::vector<float> column_mix(row_len);
+    float* mix = column_mix.data();
     for (int y = begin; y < end; ++y) {
-      int i0;
-      float wt[4];
-      coord(y, lh, &i0, wt);
-      const float* rows[4];
-      for (int k = 0; k < 4; ++k) {
-        rows[k] =
-            &horizontal[static_cast<size_t>(std::clamp(i0 - 1 + k, 0, lh - 1)) * w * channels];
+      int yi[4];
+      float wy[4];
+      taps(y, lh, yi, wy);
+      const float* r0 = &merged[yi[0] * row_len];
+      const float* r1 = &merged[yi[1] * row_len];
+      const float* r2 = &merged[yi[2] * row_len];
+      const float* r3 = &merged[yi[3] * row_len];
+      for (size_t j = 0; j < row_len; ++j) {
+        mix[j] = wy[0] * r0[j] + wy[1] * r1[j] + wy[2] * r2[j] + wy[3] * r3[j];
       }
-      for (int x = 0; x < w; ++x) {
-        const size_t p = static_cast<size_t>(y) * w + x;
-        const float nx = g.normals[3 * p], ny = g.normals[3 * p + 1], nz = g.normals[3 * p + 2];
-        const bool valid = g.depth[p] > 0 && !(nx == 0 && ny == 0 && nz == 0);
-        out->valid[p] = valid;
-        float* t = &out->transfer[p * cc];
-        if (!valid) {
-          std::fill(t, t + cc, 0.0f);
-          if (light) std::fill(&out->indirect[3 * p], &out->indirect[3 * p] + 3, 0.0f);
-          continue;
+      // One horizontal row; kCc > 0: the coefficient count known at compile time (unrolled).
+      auto horizontal = [&]<int kCc>() {
+        const int n = kCc > 0 ? kCc : cc;
+        for (int x = 0; x < w; ++x) {
+          const size_t p = static_cast<size_t>(y) * w + x;
+          const float nx = g.normals[3 * p], ny = g.normals[3 * p + 1], nz = g.normals[3 * p + 2];
+          const bool valid = g.depth[p] > 0 && !(nx == 0 && ny == 0 && nz == 0);
+          out->valid[p] = valid;
+          float* t = &out->transfer[p * cc];
+          if (!valid) {
+            std::fill(t, t + n, 0.0f);
+            if (light) std::fill(&out->indirect[3 * p], &out->indirect[3 * p] + 3, 0.0f);
+            continue;
+          }
+          const int* xi = &x_idx[4 * x];
+          const float* wx = &x_wt[4 * x];
+          const float* s0 = mix + static_cast<size_t>(xi[0]) * channels;
+          const float* s1 = mix + static_cast<size_t>(xi[1]) * channels;
+          const float* s2 = mix + static_cast<size_t>(xi[2]) * channels;
+          const float* s3 = mix + static_cast<size_t>(xi[3]) * channels;
+          for (int c = 0; c < n; ++c) {
+            t[c] = wx[0] * s0[c] + wx[1] * s1[c] + wx[2] * s2[c] + wx[3] * s3[c];
+          }
+          if (light) {
+            for (int c = cc; c < cc + 3; ++c) {
+              out->indirect[3 * p + c - cc] =
+                  std::max(0.0f, wx[0] * s0[c] + wx[1] * s1[c] + wx[2] * s2[c] + wx[3] * s3[c]);
+            }
+          }
         }
-        const size_t base = static_cast<size_t>(x) * channels;
-        for (int c = 0; c < channels; ++c) {
-          acc[c] = wt[0] * rows[0][base + c] + wt[1] * rows[1][base + c] +
-                   wt[2] * rows[2][base + c] + wt[3] * rows[3][base + c];
-        }
-        std::copy(acc, acc + cc, t);
-        if (light) {
-          for (int c = 0; c < 3; ++c) out->indirect[3 * p + c] = std::max(0.0f, acc[cc + c]);
-        }
+      };
+      if (cc == 16) {
+        horizontal.template operator()<16>();
+      } else if (cc == 9) {
+        horizontal.template operator()<9>();
+      } else {
+        horizontal.template operator()<0>();
       }
     }
   });

@@ -165,7 +165,8 @@ class TransferComputer {
   std::vector<float> offsets_;  // 4 x N, in [0.1, 1]
   // (A_l / pi) x the normalisation of Y_lm at index l (l + 1) + m, m >= 0 (analytic_unoccluded).
   std::array<float, 25> clamped_{};
-  std::vector<float> low_indirect_, row_scratch_;
+  std::vector<float> low_indirect_;
+  std::vector<float> low_merged_;  // OursFast: low-resolution transfer (+ indirect), holes filled
 };
 
 // Throws LightError("light::<where>: ...") unless `g` is usable: width, height >= 1, depth size
