@@ -6,6 +6,7 @@
 #include <random>
 #include <string>
 
+#include "occlusion_kernel.h"
 #include "parallel.h"
 #include "probeless/sh/sh.h"
 
@@ -118,9 +119,18 @@ TransferComputer::TransferComputer(const TransferOptions& options)
   // §5.1: random offsets precomputed for an area of 2x2 pixels (one row of N per pixel).
   std::mt19937_64 rng(options.seed ^ 0x9e3779b97f4a7c15ull);
   const int n = directions_.count();
-  offsets_.resize(4 * static_cast<size_t>(n));
-  for (auto& o : offsets_) {
-    o = 0.1f + 0.9f * static_cast<float>(static_cast<double>(rng() >> 11) / 9007199254740992.0);
+  n_padded_ = (n + 7) / 8 * 8;
+  offsets_.assign(4 * static_cast<size_t>(n_padded_), 0.0f);
+  for (int row = 0; row < 4; ++row) {
+    for (int j = 0; j < n; ++j) {
+      offsets_[row * n_padded_ + j] =
+          0.1f + 0.9f * static_cast<float>(static_cast<double>(rng() >> 11) / 9007199254740992.0);
+    }
+  }
+  // The directions as padded structure-of-arrays for the occlusion kernel (zero = never lit).
+  directions_soa_.assign(3 * static_cast<size_t>(n_padded_), 0.0f);
+  for (int j = 0; j < n; ++j) {
+    for (int c = 0; c < 3; ++c) directions_soa_[c * n_padded_ + j] = directions_.directions()[j][c];
   }
   // (A_l / pi) times the normalisation of Y_lm (sh::BasisNormalisation), so that
   // AddClampedCosine needs no square roots per pixel.
@@ -178,6 +188,23 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
   const float patch = kPi * radius * radius * 2.0f / n_dir;
   const float min_d2 = 0.01f * radius * radius;
   float vis[kMaxDirections];
+  int nonzero[kMaxDirections];
+  internal::OcclusionParams occ_params;
+  occ_params.depth = depth;
+  occ_params.width = w;
+  occ_params.height = h;
+  occ_params.fx = fx, occ_params.fy = fy, occ_params.cx = cx, occ_params.cy = cy;
+  occ_params.ifx = ifx, occ_params.ify = ify;
+  occ_params.radius = radius;
+  occ_params.max_occ2 = max_occ2;
+  occ_params.bias = bias, occ_params.bias_rel = bias_rel;
+  occ_params.chi = chi, occ_params.inv_chi = inv_chi;
+  occ_params.n_directions = n_dir;
+  occ_params.n_padded = n_padded_;
+  occ_params.dir_x = directions_soa_.data();
+  occ_params.dir_y = directions_soa_.data() + n_padded_;
+  occ_params.dir_z = directions_soa_.data() + 2 * n_padded_;
+  internal::PixelOcclusion occ;
 
   for (int r = row_begin; r < row_end; ++r) {
     const int v = std::min(r * step + step / 2, h - 1);
@@ -199,56 +226,53 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
       const float x0 = d * (u - cx) * ifx, x1 = d * (v - cy) * ify, x2 = d;
       // Random offsets per 2x2 block of image pixels (§5.1), keyed by the full-resolution pixel
       // also in OursFast: a sparse sample gets exactly the full variant's transfer at its pixel.
-      const float* off = offsets_.data() + static_cast<size_t>((u & 1) + 2 * (v & 1)) * n_dir;
-      for (int j = 0; j < n_dir; ++j) {
+      const float* off = offsets_.data() + static_cast<size_t>((u & 1) + 2 * (v & 1)) * n_padded_;
+      const float xp[3] = {x0, x1, x2}, np[3] = {nx, ny, nz};
+      // Main buffer (§5.1, eq. 7-8), 8 directions per step where the CPU has AVX2.
+      internal::OcclusionSimd(occ_params, off, xp, np, &occ);
+      if (!do_indirect && aux.views.empty()) {
+        // Branch-free (vectorised): nothing else to test per direction.
+        for (int j = 0; j < n_dir; ++j) {
+          const float cosn = occ.cosn[j], k_vis = occ.k[j];
+          const float s = analytic ? (k_vis - 1) * cosn : k_vis * cosn;
+          vis[j] = cosn > 0 ? s : 0.0f;
+        }
+      }
+      for (int j = 0; j < n_dir && (do_indirect || !aux.views.empty()); ++j) {
         const auto& om = dirs[j];
-        const float cosn = om[0] * nx + om[1] * ny + om[2] * nz;  // (omega_j . n(x)), eq. 6
-        if (cosn <= 0) {
+        const float cosn = occ.cosn[j];
+        if (!(cosn > 0)) {
           vis[j] = 0;
           continue;
         }
-        const float len = radius * off[j];
-        const float y0 = x0 + om[0] * len, y1 = x1 + om[1] * len, y2 = x2 + om[2] * len;
-        float k_vis = 1;
-        // Main buffer: project y_j, look up s_j; occluded if s_j is closer than y_j (§5.1).
-        if (y2 > 1e-3f) {
-          const float inv_z = 1.0f / y2;
-          const float pu = fx * y0 * inv_z + cx, pv = fy * y1 * inv_z + cy;
-          if (pu > -0.5f && pv > -0.5f && pu < w - 0.5f && pv < h - 0.5f) {
-            const int iu = static_cast<int>(pu + 0.5f), iv = static_cast<int>(pv + 0.5f);
-            const size_t q = static_cast<size_t>(iv) * w + iu;
-            const float ds = depth[q];
-            if (ds > 0 && ds < y2 - (bias + bias_rel * y2)) {
-              const float s0 = ds * (iu - cx) * ifx - x0, s1 = ds * (iv - cy) * ify - x1,
-                          s2 = ds - x2;
-              const float dist2 = s0 * s0 + s1 * s1 + s2 * s2;
-              if (dist2 <= max_occ2 && dist2 > 1e-12f) {
-                const float inv = 1.0f / std::sqrt(dist2);
-                const float t0 = s0 * inv, t1 = s1 * inv, t2 = s2 * inv;  // eq. 7
-                const float cos_a = t0 * om[0] + t1 * om[1] + t2 * om[2];
-                k_vis = std::min(chi, 1.0f - cos_a) * inv_chi;  // eq. 8
-                if (do_indirect && k_vis < 1) {
-                  // eq. 10-12: light reflected by s_j towards x from the dominant light.
-                  const float* ns = normals + 3 * q;
-                  const float cos_s = -(ns[0] * t0 + ns[1] * t1 + ns[2] * t2);
-                  const float cos_x = nx * t0 + ny * t1 + nz * t2;
-                  const float e = ns[0] * light->direction[0] + ns[1] * light->direction[1] +
-                                  ns[2] * light->direction[2];
-                  if (cos_s > 0 && cos_x > 0 && e > 0) {
-                    const float f = (1 - k_vis) * e * light->intensity * cos_x * cos_s * patch /
-                                    (kPi * kPi * std::max(dist2, min_d2));
-                    if (g.colour.empty()) {
-                      ind[0] += f, ind[1] += f, ind[2] += f;
-                    } else {
-                      const uint8_t* a = g.colour.data() + 3 * q;
-                      ind[0] += f * lut[a[0]], ind[1] += f * lut[a[1]], ind[2] += f * lut[a[2]];
-                    }
-                  }
-                }
-              }
+        float k_vis = occ.k[j];
+        if (do_indirect && k_vis < 1) {
+          // eq. 10-12: light reflected by s_j towards x from the dominant light.
+          const int32_t q = occ.occluder[j];
+          const int iu = q % w, iv = q / w;
+          const float ds = depth[q];
+          const float s0 = ds * (iu - cx) * ifx - x0, s1 = ds * (iv - cy) * ify - x1, s2 = ds - x2;
+          const float dist2 = s0 * s0 + s1 * s1 + s2 * s2;
+          const float inv = 1.0f / std::sqrt(dist2);
+          const float t0 = s0 * inv, t1 = s1 * inv, t2 = s2 * inv;  // eq. 7
+          const float* ns = normals + 3 * static_cast<size_t>(q);
+          const float cos_s = -(ns[0] * t0 + ns[1] * t1 + ns[2] * t2);
+          const float cos_x = nx * t0 + ny * t1 + nz * t2;
+          const float e = ns[0] * light->direction[0] + ns[1] * light->direction[1] +
+                          ns[2] * light->direction[2];
+          if (cos_s > 0 && cos_x > 0 && e > 0) {
+            const float f = (1 - k_vis) * e * light->intensity * cos_x * cos_s * patch /
+                            (kPi * kPi * std::max(dist2, min_d2));
+            if (g.colour.empty()) {
+              ind[0] += f, ind[1] += f, ind[2] += f;
+            } else {
+              const uint8_t* a = g.colour.data() + 3 * static_cast<size_t>(q);
+              ind[0] += f * lut[a[0]], ind[1] += f * lut[a[1]], ind[2] += f * lut[a[2]];
             }
           }
         }
+        const float len = radius * off[j];
+        const float y0 = x0 + om[0] * len, y1 = x1 + om[1] * len, y2 = x2 + om[2] * len;
         // Auxiliary orthographic buffers: hidden surfaces occlude too (§5.1, Fig. 5a).
         for (const OrthographicView& av : aux.views) {
           if (k_vis <= 0) break;
@@ -280,18 +304,26 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
         vis[j] = analytic ? (k_vis - 1) * cosn : k_vis * cosn;
       }
       // T_n(x) = sum_j K(x, w_j) (w_j . n) Y_n(w_j) 4 pi / (N pi) (eq. 6): contiguous, SIMD.
+      // Only the directions with a non-zero term (with analytic_unoccluded: the occluded ones),
+      // listed without branches (a data-dependent skip mispredicts about every other direction).
+      int terms = 0;
+      for (int j = 0; j < n_dir; ++j) {
+        nonzero[terms] = j;
+        terms += vis[j] != 0;
+      }
       std::fill(t_out, t_out + cc, 0.0f);
       if (cc == 16) {
         float acc[16] = {};
-        for (int j = 0; j < n_dir; ++j) {
+        for (int i = 0; i < terms; ++i) {
+          const int j = nonzero[i];
           const float s = vis[j];
-          if (s == 0) continue;
           const float* wj = weights + j * 16;
           for (int k = 0; k < 16; ++k) acc[k] += s * wj[k];
         }
         std::copy(acc, acc + 16, t_out);
       } else {
-        for (int j = 0; j < n_dir; ++j) {
+        for (int i = 0; i < terms; ++i) {
+          const int j = nonzero[i];
           const float s = vis[j];
           const float* wj = weights + static_cast<size_t>(j) * cc;
           for (int k = 0; k < cc; ++k) t_out[k] += s * wj[k];

@@ -162,7 +162,9 @@ class TransferComputer {
   void AddClampedCosine(float x, float y, float z, float* out) const;
   TransferOptions options_;
   DirectionSet directions_;
-  std::vector<float> offsets_;  // 4 x N, in [0.1, 1]
+  int n_padded_ = 0;                   // N rounded up to a multiple of 8 (the SIMD kernel's width)
+  std::vector<float> offsets_;         // 4 rows of n_padded_: N values in [0.1, 1], then zeros
+  std::vector<float> directions_soa_;  // x, y, z rows of n_padded_ (zero-padded)
   // (A_l / pi) x the normalisation of Y_lm at index l (l + 1) + m, m >= 0 (analytic_unoccluded).
   std::array<float, 25> clamped_{};
   std::vector<float> low_indirect_;
