@@ -20,6 +20,9 @@
 // without any light is left out), the same against the light at the camera
 // (dominant_dir_error_vs_camera_light_deg_median), and |l - l_true| / |l_true| over bands 0-2 of
 // the grey (mean RGB) truth. --grey-world: one uniform albedo (no chromaticity groups);
+// --albedo-groups N: chromaticity cells per axis (EstimateOptions / PointLightOptions
+// ::albedo_groups, default 32); --invariant-albedo: the illuminant-invariant groups
+// (::albedo_invariant);
 // --quadrature: eq. 6 as printed (no analytic unoccluded transfer) — ablations. Timings are per
 // frame at the stream's resolution with --threads workers (default 2): wall ms, process CPU ms of
 // the transfer (all threads) and thread CPU ms of the estimate. Output: one JSON object; plots as
@@ -115,6 +118,8 @@ struct Options {
   bool aux = false;
   bool camera_truth = false;      // --camera-truth: score against the light at the camera
   bool grey_world = false;        // --grey-world: one uniform albedo (no chromaticity groups)
+  bool invariant_albedo = false;  // --invariant-albedo: EstimateOptions::albedo_invariant
+  int albedo_groups = -1;         // --albedo-groups N: EstimateOptions::albedo_groups (and point's)
   bool quadrature = false;        // --quadrature: eq. 6 as printed (no analytic unoccluded part)
   bool fused = false;             // --fused: also run on fusion's G_r (in-process FusionPipeline)
   bool fused_known_pose = false;  // --fused-known-pose: the simulator's pose instead of ICP
@@ -642,6 +647,10 @@ int Run(int argc, char** argv) {
       o.camera_truth = true;
     else if (a == "--grey-world")
       o.grey_world = true;
+    else if (a == "--invariant-albedo")
+      o.invariant_albedo = true;
+    else if (a == "--albedo-groups")
+      o.albedo_groups = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--quadrature")
       o.quadrature = true;
     else if (a == "--fused")
@@ -802,6 +811,8 @@ int Run(int argc, char** argv) {
   fast_o.subsample = 4;
   light::EstimateOptions eo;
   if (o.grey_world) eo.albedo_groups = 0;
+  eo.albedo_invariant = o.invariant_albedo;
+  if (o.albedo_groups >= 0) eo.albedo_groups = o.albedo_groups;
   if (o.no_balance) eo.balance_normals = false;
   light::TemporalOptions to;
   to.frames = o.temporal;
@@ -820,6 +831,8 @@ int Run(int argc, char** argv) {
     if (o.warm_lm > 0) v->scene.point.warm_lm_iterations = o.warm_lm;
     if (!o.point_screen) v->scene.point.screen_rows = 0;
     if (o.grey_world) v->scene.point.albedo_groups = 0;
+    v->scene.point.albedo_invariant = o.invariant_albedo;
+    if (o.albedo_groups >= 0) v->scene.point.albedo_groups = o.albedo_groups;
   }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
   std::vector<double> measured_noise;  // DepthGeometry's measured noise k per sensor frame
@@ -1244,6 +1257,7 @@ int Run(int argc, char** argv) {
       << ",\n  \"aux_views\": " << (o.aux ? "true" : "false") << ",\n  \"truth\": \""
       << (o.log.empty() && !o.camera_truth ? "surface" : "camera") << "\""
       << ",\n  \"albedo_groups\": " << eo.albedo_groups
+      << ",\n  \"albedo_invariant\": " << (eo.albedo_invariant ? "true" : "false")
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")
       << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin << ",\n  \"light_model\": \""
       << light::LightModelName(o.light_model) << "\",\n  \"lamps\": " << o.lamps

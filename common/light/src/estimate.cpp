@@ -6,6 +6,7 @@
 #include <numbers>
 #include <string>
 
+#include "albedo_groups.h"
 #include "probeless/linalg/cholesky.h"
 #include "probeless/sh/sh.h"
 
@@ -512,18 +513,14 @@ LightEstimate EstimateFromRows(std::vector<float> rows, std::vector<float> targe
     targets.resize(m);
     if (weighted) weights.resize(m);
   }
-  // Chromaticity cells of the linear colour (the albedo's under white light).
-  std::vector<uint16_t> group(m);
-  for (size_t i = 0; i < m; ++i) {
-    const float r = rgb[3 * i], gr = rgb[3 * i + 1], b = rgb[3 * i + 2];
-    const float sum = r + gr + b;
-    const int rc = std::min(cells - 1, static_cast<int>(r / sum * cells));
-    const int gc = std::min(cells - 1, static_cast<int>(gr / sum * cells));
-    group[i] = static_cast<uint16_t>(rc * cells + gc);
-  }
+  // Albedo groups: chromaticity cells of the linear colour (the albedo's under white light), or
+  // the illuminant-invariant coordinate (options.albedo_invariant).
+  int ids = 0;
+  const std::vector<int> group =
+      internal::AlbedoGroupIds({rgb.data(), 3 * m}, cells, options.albedo_invariant, &ids);
   // Per-group albedo (relative to options.albedo), alternating with the light.
   std::vector<float> scaled(targets);
-  const size_t group_count = static_cast<size_t>(cells) * cells;
+  const size_t group_count = static_cast<size_t>(ids);
   std::vector<double> sum_ip(group_count), sum_pp(group_count);
   std::vector<int> count(group_count, 0);
   std::vector<float> scale(group_count, 1.0f);

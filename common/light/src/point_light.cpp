@@ -9,6 +9,7 @@
 #include <numbers>
 #include <string>
 
+#include "albedo_groups.h"
 #include "probeless/linalg/cholesky.h"
 #include "probeless/sh/sh.h"
 
@@ -676,19 +677,16 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   const bool grouped = !colour.empty() && o.albedo_groups > 0;
   const int cells = grouped ? o.albedo_groups : 1;
   Rows r;
+  std::vector<float> row_rgb;  // linear colour per row (grouped)
   for (int v = stride / 2; v < g.height; v += stride) {
     for (int u = stride / 2; u < g.width; u += stride) {
       const size_t p = static_cast<size_t>(v) * g.width + u;
       if (!usable(p)) continue;
-      int group = 0;
       if (grouped) {
         const float cr = SrgbToLinear(colour[3 * p]), cg = SrgbToLinear(colour[3 * p + 1]),
                     cb = SrgbToLinear(colour[3 * p + 2]);
-        const float sum = cr + cg + cb;
-        if (!(sum > 0)) continue;
-        const int gx = std::min(cells - 1, static_cast<int>(cr / sum * cells));
-        const int gy = std::min(cells - 1, static_cast<int>(cg / sum * cells));
-        group = gy * cells + gx;
+        if (!(cr + cg + cb > 0)) continue;
+        row_rgb.insert(row_rgb.end(), {cr, cg, cb});
       }
       const double z = g.depth[p];
       r.x.insert(r.x.end(), {(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z});
@@ -701,14 +699,18 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
         t0 = transfer->transfer[p * transfer->coefficient_count];
       }
       r.t0.push_back(t0);
-      r.group.push_back(group);
     }
+  }
+  int groups = 1;
+  if (grouped) {
+    r.group = internal::AlbedoGroupIds(row_rgb, cells, o.albedo_invariant, &groups);
+  } else {
+    r.group.assign(r.size(), 0);
   }
   out.rows = static_cast<int>(r.size());
   if (r.size() < static_cast<size_t>(kMinRows)) return out;
 
   const double min_d2 = static_cast<double>(o.min_lamp_distance_m) * o.min_lamp_distance_m;
-  const int groups = cells * cells;
   std::vector<double> ones(r.size(), 1.0);
   const size_t coarse_step = std::max<size_t>(1, r.size() / kCoarseRows);
   Model point{false, 1, min_d2};

@@ -60,6 +60,11 @@ struct EstimateOptions {
   // run in the last one only).
   int albedo_groups = 32;
   int albedo_iterations = 3;
+  // Group by the illuminant-invariant log-chromaticity coordinate instead of the chromaticity
+  // cells (Finlayson, Drew & Lu 2004; light's albedo_groups.h): a light whose colour varies over
+  // the surfaces (a warm lamp against a bluish ambient) splits one material over several
+  // chromaticity cells by its shading; the invariant coordinate does not (docs/light.md).
+  bool albedo_invariant = false;
 };
 
 struct LightEstimate {

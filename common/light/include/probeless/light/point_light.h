@@ -35,6 +35,7 @@ struct PointLightOptions {
   // Chromaticity cells per axis as EstimateOptions::albedo_groups (0 = one albedo): each group
   // with >= 16 rows gets its own albedo, fitted jointly with the light; the rest share one.
   int albedo_groups = 32;
+  bool albedo_invariant = false;      // as EstimateOptions::albedo_invariant
   int huber_iterations = 2;           // robust reweightings after the plain fit: Huber (k = 1.345),
   int tukey_iterations = 3;           // then Tukey's biweight (c = 4.685); MAD scale
   int lm_iterations = 8;              // Levenberg-Marquardt iterations per (re)weighted solve
