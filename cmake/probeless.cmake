@@ -15,14 +15,18 @@ else()
 endif()
 
 # probeless_add_test(NAME <name> SOURCES <files...> LIBS <targets...> [LABELS <labels...>]
-#                    [TIMEOUT <seconds>])
-# One GoogleTest executable registered with ctest under its own name.
+#                    [TIMEOUT <seconds>] [INCLUDES <dirs...>])
+# One GoogleTest executable registered with ctest under its own name; INCLUDES adds private include
+# directories (a library's src/ for tests of its private kernels). Nothing when tests are off.
 function(probeless_add_test)
-  cmake_parse_arguments(T "" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(T "" "NAME;TIMEOUT" "SOURCES;LIBS;LABELS;INCLUDES" ${ARGN})
   if(NOT PROBELESS_BUILD_TESTS)
     return()
   endif()
   add_executable(${T_NAME} ${T_SOURCES})
+  if(T_INCLUDES)
+    target_include_directories(${T_NAME} PRIVATE ${T_INCLUDES})
+  endif()
   set_target_properties(${T_NAME} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/tests)
   target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main)
   target_compile_definitions(${T_NAME} PRIVATE
