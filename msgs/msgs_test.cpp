@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -238,7 +239,7 @@ void ExpectDistinctSelfConsistentHashes() {
 TEST(LayoutHashTest, EveryMessageTypeHasADistinctSelfConsistentHash) {
   ExpectDistinctSelfConsistentHashes<Header, Vector3, Quaternion, RigidTransform, Image, CameraInfo,
                                      Pose, FaceObservation, ShLight, GeometryBuffer, TransferBuffer,
-                                     Ack, PlayerControl>();
+                                     Ack, PlayerControl, AuxiliaryView, AuxiliaryViews>();
 }
 
 TEST(ReplayMessagesTest, AckTopicFitsEveryBusTopicName) {
@@ -584,6 +585,109 @@ TEST(GeometryBufferTest, RejectsShortPayloadOverlapAndMisalignment) {
   EXPECT_EQ(ErrorOf([&] { g.Validate(1000); }),
             "probeless_msgs/GeometryBuffer 5x3: normals plane (offset 18446744073709551612, 180 "
             "bytes) exceeds the payload of 1000 bytes");
+}
+
+// --- AuxiliaryViews
+// --------------------------------------------------------------------------------
+
+// Two views (left 5x3, top 4x4) with a 90-degree rotation about y and a translation.
+void FillTwoViews(AuxiliaryViews& a) {
+  a.header.SetFrameId("camera_optical");
+  a.header.stamp_ns = 1234;
+  a.view_count = 2;
+  const float rot[9] = {0, 0, 1, 0, 1, 0, -1, 0, 0};
+  a.views[0].role = AuxiliaryViewRole::kLeft;
+  a.views[0].width = 5;
+  a.views[0].height = 3;
+  a.views[1].role = AuxiliaryViewRole::kTop;
+  a.views[1].width = 4;
+  a.views[1].height = 4;
+  for (uint32_t i = 0; i < 2; ++i) {
+    a.views[i].pixel_size_m = 0.03f;
+    std::copy(rot, rot + 9, a.views[i].rotation);
+    a.views[i].translation[0] = -1.5f;
+    a.views[i].translation[2] = 2.0f + i;
+  }
+  a.SetStandardLayout();
+}
+
+TEST(AuxiliaryViewsTest, RoundTripThroughASlot) {
+  EXPECT_EQ(AuxiliaryViews::StandardPayloadBytes(3, 128, 128), 2u * 65536 + 65536);
+  EXPECT_EQ(AuxiliaryViews::MessageBytesFor(3, 5, 3), 384u + 64 + 64 + 60);
+  Slot slot(AuxiliaryViews::MessageBytesFor(2, 5, 4));
+  WriteView<AuxiliaryViews> out = WriteMessage<AuxiliaryViews>(slot.bytes());
+  FillTwoViews(*out);
+  EXPECT_EQ(out->views[1].depth_offset, 64u);  // 60 bytes rounded up
+  EXPECT_EQ(out->PayloadBytes(), 64u + 64);
+  std::span<float> d0 = AuxiliaryDepth(*out, out.payload, 0);
+  std::span<float> d1 = AuxiliaryDepth(*out, out.payload, 1);
+  ASSERT_EQ(d0.size(), 15u);
+  ASSERT_EQ(d1.size(), 16u);
+  for (size_t i = 0; i < d0.size(); ++i) d0[i] = 0.5f + i;
+  for (size_t i = 0; i < d1.size(); ++i) d1[i] = 2.0f + i;
+
+  ReadView<AuxiliaryViews> in = ReadMessage<AuxiliaryViews>(slot.cbytes());
+  EXPECT_EQ(in->header.FrameId(), "camera_optical");
+  EXPECT_EQ(in->header.stamp_ns, 1234);
+  ASSERT_EQ(in->view_count, 2u);
+  EXPECT_EQ(in->views[0].role, AuxiliaryViewRole::kLeft);
+  EXPECT_EQ(in->views[1].role, AuxiliaryViewRole::kTop);
+  EXPECT_EQ(in->views[1].translation[2], 3.0f);
+  EXPECT_EQ(in->views[0].rotation[2], 1.0f);
+  EXPECT_EQ(AuxiliaryDepth(*in, in.payload, 0)[14], 14.5f);
+  EXPECT_EQ(AuxiliaryDepth(*in, in.payload, 1)[15], 17.0f);
+  EXPECT_EQ(ErrorOf([&] { AuxiliaryDepth(*in, in.payload, 2); }),
+            "probeless_msgs/AuxiliaryViews: view 2 of 2");
+  EXPECT_NE(AuxiliaryViews::LayoutDescription().find(
+                "role:AuxiliaryViewRole{invalid=0,left=1,right=2,top=3,light=4}:u32@0"),
+            std::string::npos);
+}
+
+TEST(AuxiliaryViewsTest, MalformedMessagesAreRejectedWithOneLine) {
+  AuxiliaryViews a;
+  FillTwoViews(a);
+  const size_t bytes = a.PayloadBytes();
+  EXPECT_NO_THROW(a.Validate(bytes));
+  EXPECT_EQ(ErrorOf([&] { a.Validate(bytes - 1); }),
+            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset 64, 64 bytes) "
+            "exceeds the payload of 127 bytes");
+  AuxiliaryViews b = a;
+  b.view_count = 5;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews: view_count 5 exceeds 4");
+  b = a;
+  b.views[1].role = static_cast<AuxiliaryViewRole>(9);
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 1 (invalid 4x4): unknown role 9");
+  b = a;
+  b.views[0].width = 0;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 0 (left 0x3): width and height must be in 1..4096");
+  b = a;
+  b.views[0].pixel_size_m = std::nanf("");
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 0 (left 5x3): pixel_size_m must be finite and > 0");
+  b = a;
+  b.views[0].rotation[0] = 0.5f;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 0 (left 5x3): rotation is not orthonormal");
+  b = a;
+  b.views[1].translation[1] = INFINITY;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): non-finite translation");
+  b = a;
+  b.views[1].depth_offset = 32;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane overlaps view 0's");
+  b.views[1].depth_offset = 66;
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth offset must be a multiple of 4");
+  b.views[1].depth_offset = ~uint64_t{0} - 3;  // would wrap around in a naive end computation
+  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
+            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset "
+            "18446744073709551612, 64 bytes) exceeds the payload of 128 bytes");
+  b.view_count = 0;  // no views: valid, empty payload
+  EXPECT_NO_THROW(b.Validate(0));
 }
 
 TEST(TransferBufferTest, SizesIndexingAndErrors) {

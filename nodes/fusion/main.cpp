@@ -15,14 +15,21 @@
 // recon::MergeOptions), icp_iterations ([4, 5, 10], fine to coarse), mesh_out (""
 // or a .ply path written at shutdown), world_frame ("world"), normals (G_r's normals: "depth" =
 // from D''', "volume" = the TSDF gradient where D''' agrees with the volume; see
-// recon::FusionOptions::normal_source), normal_gap (0.03 m), normal_gradient_step (1 voxel). Reset:
+// recon::FusionOptions::normal_source), normal_gap (0.03 m), normal_gradient_step (1 voxel),
+// publish_aux (false: publish the auxiliary orthographic views of §5.1 on scene/aux, an
+// AuxiliaryViews with the G_r's header, before the G_r; left, right, top), aux_pixels (128 per
+// side), aux_light (false: also the view from the light: subscribes scene/light, the ShLight
+// scene_light publishes in the camera frame of a G_r, turns its dominant direction into the world
+// with the pose of that G_r's stamp and adds the light view to every later frame's views). Reset:
 // publish any probeless_msgs/Header on ~/reset (/fusion/reset).
 //
 // A frame is processed when its depth and its image (same header.stamp_ns) have both arrived, or
 // on the depth alone when no image with that stamp comes before the next depth. Exit: 0 on
 // SIGINT/SIGTERM, 2 on bad params, 1 otherwise.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <deque>
 #include <optional>
 #include <string>
 #include <vector>
@@ -104,6 +111,13 @@ int Run(int argc, char** argv) {
       node.Param("normal_gradient_step", double{options.volume_normal_step_voxels}));
   const std::string mesh_out = node.Param("mesh_out", "");
   const std::string world_frame = node.Param("world_frame", "world");
+  const bool publish_aux = node.Param("publish_aux", false);
+  const int aux_pixels = node.Param("aux_pixels", 128);
+  const bool aux_light = node.Param("aux_light", false);
+  if (aux_pixels < 1 || aux_pixels > static_cast<int>(msgs::kMaxAuxiliaryViewPixels)) {
+    throw node::NodeError("fusion: param aux_pixels must be in 1..4096, got " +
+                          std::to_string(aux_pixels));
+  }
   recon::FusionPipeline pipeline(options);
   for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
 
@@ -114,6 +128,19 @@ int Run(int argc, char** argv) {
   std::optional<bus::Publisher> gbuffer_pub;
   uint32_t gbuffer_w = 0, gbuffer_h = 0;
   bus::Publisher pose_pub = node.CreatePublisher<msgs::Pose>("scene/pose");
+  std::optional<bus::Publisher> aux_pub;
+  std::optional<bus::Subscriber> light_sub;
+  if (publish_aux) {
+    bus::PublisherOptions po;
+    po.max_message_bytes = msgs::AuxiliaryViews::MessageBytesFor(
+        4, static_cast<uint32_t>(aux_pixels), static_cast<uint32_t>(aux_pixels));
+    aux_pub.emplace(node.CreatePublisher<msgs::AuxiliaryViews>("scene/aux", po));
+    if (aux_light) light_sub.emplace(node.CreateSubscriber<msgs::ShLight>("scene/light"));
+  }
+  // Poses of the last frames by stamp (to bring scene/light's camera-frame direction into the
+  // world) and the light direction in the world (none until scene/light brings one).
+  std::deque<std::pair<int64_t, recon::Pose>> recent_poses;
+  std::optional<recon::Vec3f> light_world;
 
   std::optional<msgs::CameraInfo> info;
   std::optional<PendingDepth> pending_depth;
@@ -143,6 +170,21 @@ int Run(int argc, char** argv) {
       out->SetChildFrameId(d.header.FrameId());
       out->transform = r.camera_to_world.ToMsg();
       pose_pub.Publish(std::move(loan));
+      recent_poses.emplace_back(d.header.stamp_ns, r.camera_to_world);
+      if (recent_poses.size() > 32) recent_poses.pop_front();
+      if (aux_pub) {
+        // Before the G_r, so a subscriber finds the views when the G_r arrives.
+        const std::vector<recon::AuxiliaryRaycast> views =
+            recon::RaycastAuxiliaryViews(pipeline.volume(), r.camera_to_world, aux_pixels,
+                                         light_world ? &*light_world : nullptr, pipeline.pool());
+        const uint32_t n = static_cast<uint32_t>(aux_pixels);
+        bus::Loan aux_loan = aux_pub->Borrow(
+            msgs::AuxiliaryViews::MessageBytesFor(static_cast<uint32_t>(views.size()), n, n));
+        auto aux = msgs::WriteMessage<msgs::AuxiliaryViews>(aux_loan.data());
+        aux->header = d.header;
+        recon::WriteAuxiliaryViews(r.camera_to_world, views, *aux, aux.payload);
+        aux_pub->Publish(std::move(aux_loan));
+      }
     }
     if (options.merge_enabled) {
       const uint32_t w = static_cast<uint32_t>(d.depth.width),
@@ -226,9 +268,25 @@ int Run(int argc, char** argv) {
        [&](bus::Sample&&) {
          pipeline.Reset();
          pending_depth.reset();
+         recent_poses.clear();
+         light_world.reset();
          node.Info() << "reset: map cleared";
        }},
   };
+  if (light_sub) {
+    handlers.push_back({&*light_sub, [&](bus::Sample&& s) {
+                          const auto m = msgs::ReadMessage<msgs::ShLight>(s.data());
+                          const float* dir = m->dominant_direction;
+                          const float len2 = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
+                          if (!(len2 > 1e-6f) || !std::isfinite(len2)) return;  // none
+                          for (const auto& [stamp, pose] : recent_poses) {
+                            if (stamp != m->header.stamp_ns) continue;
+                            light_world = recon::Normalized(pose.Rotate({dir[0], dir[1], dir[2]}));
+                            return;
+                          }
+                          node.Debug() << "scene/light for an unknown stamp: ignored";
+                        }});
+  }
   for (auto& h : handlers) h.on_sample = guarded(h.on_sample);
   node.Info() << "fusion: " << options.volume.resolution << "^3 voxels over "
               << options.volume.size_m << " m, " << options.threads << " threads";

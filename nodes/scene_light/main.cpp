@@ -34,7 +34,12 @@
 //   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
 //   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r),
 //   shadows (true in gbuffer mode, false in depth mode: the distant light's direction refined by
-//   cast shadows, light::RefineLightWithShadows; not with temporal_frames > 1), shadow_stride (8).
+//   cast shadows, light::RefineLightWithShadows; not with temporal_frames > 1), shadow_stride (8),
+//   use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes with
+//   publish_aux on `scene/aux` (msgs::AuxiliaryViews) take part in the transfer's occlusion test;
+//   the views with the G_r's stamp are used, waiting at most aux_wait_ms (50) for them; without a
+//   match the frame runs without views (one warning, counted at exit), and a malformed message is
+//   one error line and the frame runs without views).
 //   The lamp positions are not in msgs::ShLight: they go to the debug log. The point fit starts
 //   from the previous frame's lamp while the point model is in use (light::PointLightTracker).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
@@ -42,6 +47,8 @@
 #include "probeless/node/main.h"
 
 #include <algorithm>
+#include <chrono>
+#include <deque>
 #include <optional>
 #include <string>
 #include <vector>
@@ -141,6 +148,15 @@ int Run(int argc, char** argv) {
     }
     so.model = light::LightModel::kDistant;
   }
+  const bool use_aux = node.Param("use_aux", false);
+  const int aux_wait_ms = node.Param("aux_wait_ms", 50);
+  if (aux_wait_ms < 0) {
+    throw node::UsageError("scene_light: aux_wait_ms must be >= 0, got " +
+                           std::to_string(aux_wait_ms));
+  }
+  if (use_aux && mode != "gbuffer") {
+    throw node::UsageError("scene_light: use_aux needs mode gbuffer (the views come from fusion)");
+  }
   light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
   light::PointLightTracker point_tracker;       // warm starts of the point fit across frames
   light::TransferComputer computer(to);         // throws LightError for bad options
@@ -150,6 +166,43 @@ int Run(int argc, char** argv) {
   bus::Subscriber trigger_sub = mode == "gbuffer"
                                     ? node.CreateSubscriber<msgs::GeometryBuffer>("scene/gbuffer")
                                     : node.CreateSubscriber<msgs::Image>("camera/depth");
+  // Taken in the G_r's handler (matched by stamp), not by Spin.
+  std::optional<bus::Subscriber> aux_sub;
+  if (use_aux) {
+    aux_sub.emplace(node.CreateSubscriber<msgs::AuxiliaryViews>("scene/aux", {.queue_depth = 8}));
+  }
+  std::deque<bus::Sample> aux_queue;  // received views not yet matched, oldest first
+  int64_t aux_used = 0, aux_missing = 0, aux_bad = 0;
+  // The views with `stamp`: drops older ones, waits up to aux_wait_ms while none as new arrived.
+  auto take_aux = [&](int64_t stamp) -> std::optional<bus::Sample> {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(aux_wait_ms);
+    while (true) {
+      // Acknowledged on receipt (they are taken outside Spin): the player's lock-step counts every
+      // input of the node; the G_r that follows them is acknowledged by Spin after its frame.
+      while (auto s = aux_sub->TryTake()) {
+        node.Ack(*aux_sub, s->info());
+        aux_queue.push_back(std::move(*s));
+      }
+      while (!aux_queue.empty()) {
+        bus::Sample front = std::move(aux_queue.front());
+        aux_queue.pop_front();
+        // Throws MessageError for a sample shorter than the struct (then dropped).
+        const int64_t front_stamp =
+            msgs::ReadMessage<msgs::AuxiliaryViews>(front.data())->header.stamp_ns;
+        if (front_stamp > stamp) {  // the G_r's views never came
+          aux_queue.push_front(std::move(front));
+          return std::nullopt;
+        }
+        if (front_stamp == stamp) return front;
+      }
+      const auto now = std::chrono::steady_clock::now();
+      if (now >= deadline) return std::nullopt;
+      if (auto s = aux_sub->Take(deadline - now)) {
+        node.Ack(*aux_sub, s->info());
+        aux_queue.push_back(std::move(*s));
+      }
+    }
+  };
   bus::Publisher light_pub = node.CreatePublisher<msgs::ShLight>("scene/light");
   std::optional<bus::Publisher> transfer_pub, indirect_pub;
   size_t transfer_capacity = 0, indirect_capacity = 0;
@@ -225,7 +278,30 @@ int Run(int argc, char** argv) {
     }
     light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
     const bool indirect = publish_indirect && dominant.has_value();
-    computer.Compute(view, {}, indirect ? &*dominant : nullptr, &result);
+    std::optional<bus::Sample> aux_sample;
+    light::AuxiliaryBuffers aux;  // borrows aux_sample's payload
+    if (aux_sub) {
+      try {
+        aux_sample = take_aux(header.stamp_ns);
+        if (aux_sample) {
+          const auto m = msgs::ReadMessage<msgs::AuxiliaryViews>(aux_sample->data());
+          aux = light::AuxiliaryFromMessage(*m, m.payload);
+          ++aux_used;
+        } else {
+          if (aux_missing == 0) {
+            node.Warn() << "no scene/aux for the G_r of stamp " << header.stamp_ns << " within "
+                        << aux_wait_ms << " ms: frames without one run without auxiliary views";
+          }
+          ++aux_missing;
+        }
+      } catch (const msgs::MessageError& e) {
+        node.Error() << e.what() << " (frame " << header.sequence
+                     << " runs without auxiliary views)";
+        aux = {};
+        ++aux_bad;
+      }
+    }
+    computer.Compute(view, aux, indirect ? &*dominant : nullptr, &result);
     light::LightEstimate e;
     if (tmo.frames > 1) {
       e = temporal.Estimate(result, grey, eo, rgb, nullptr, weights);
@@ -305,6 +381,10 @@ int Run(int argc, char** argv) {
       {&trigger_sub, process}};
   node.Spin(handlers);
   node.Info() << "published " << published << " lights for " << frames << " frames";
+  if (use_aux) {
+    node.Info() << "auxiliary views: used for " << aux_used << " frames, missing for "
+                << aux_missing << ", malformed for " << aux_bad;
+  }
   return 0;
 }
 

@@ -4,18 +4,27 @@
 // (valid bands, unit direction, confidence in [0, 1], transfer 640x480x16); with indirect:=true
 // one /scene/indirect (rgb32f 640x480, finite, non-negative, lit somewhere) for every frame after
 // the first (it needs the previous frame's light); plus the node's one-line error for a bad mode.
+// launch/scene_light.yaml with aux:=true on the same scenario: player (lock-step) -> fusion
+// (publish_aux) -> scene_light (use_aux): every frame gets 3 auxiliary views of 128 x 128 with its
+// G_r's stamp and scene_light uses them; auxiliary views of the wrong type on /scene/aux stop
+// scene_light with one line, a malformed one is one error line and the frame runs without views.
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <map>
+#include <set>
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
@@ -155,6 +164,241 @@ TEST(SceneLightLaunch, BadModeIsAOneLineError) {
   EXPECT_EQ(log2,
             "[error] [scene_light] scene_light: gbuffer_normals must be fusion or depth, got "
             "'volume'\n");
+}
+
+std::string ReadFile(const std::string& path) {
+  std::string text;
+  if (FILE* f = std::fopen(path.c_str(), "r")) {
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+    std::fclose(f);
+  }
+  return text;
+}
+
+struct AuxInfo {
+  uint32_t count = 0;
+  std::vector<std::array<uint32_t, 3>> views;  // role, width, height
+  size_t with_depth = 0;                       // pixels with a surface over all views
+  std::string error;
+};
+
+// launch/scene_light.yaml with aux:=true (and `extra` args) on 3 courtyard frames: the views on
+// /scene/aux by stamp, the stamps of /scene/light and the launch's stderr.
+void RunAuxLaunch(const std::string& extra, std::map<int64_t, AuxInfo>* aux,
+                  std::set<int64_t>* light_stamps, std::string* log) {
+  bus::Subscriber lights("/scene/light", msgs::TopicTypeOf<msgs::ShLight>(), {.queue_depth = 64});
+  bus::Subscriber auxes("/scene/aux", msgs::TopicTypeOf<msgs::AuxiliaryViews>(),
+                        {.queue_depth = 16});
+  std::atomic<bool> stop{false};
+  std::thread drain([&] {
+    while (!stop) {
+      bool any = false;
+      while (auto s = lights.TryTake()) {
+        light_stamps->insert(msgs::ReadMessage<msgs::ShLight>(s->data())->header.stamp_ns);
+        any = true;
+      }
+      while (auto s = auxes.TryTake()) {
+        const auto m = msgs::ReadMessage<msgs::AuxiliaryViews>(s->data());
+        AuxInfo a;
+        a.count = m->view_count;
+        try {
+          for (uint32_t i = 0; i < m->view_count; ++i) {
+            const auto& v = m->views[i];
+            a.views.push_back({static_cast<uint32_t>(v.role), v.width, v.height});
+            for (float d : msgs::AuxiliaryDepth(*m, m.payload, i)) a.with_depth += d > 0;
+          }
+        } catch (const msgs::MessageError& e) {
+          a.error = e.what();
+        }
+        (*aux)[m->header.stamp_ns] = a;
+        any = true;
+      }
+      if (!any) std::this_thread::sleep_for(1ms);
+    }
+  });
+  const std::string err = "/tmp/scene_light_aux_launch_" + std::to_string(getpid()) + ".txt";
+  // The courtyard needs the demo's 6 m volume (the default 2 m cube loses tracking there).
+  const std::string command =
+      std::string(PROBELESS_BIN_DIR) + "/probeless launch " + PROBELESS_SOURCE_DIR +
+      "/launch/scene_light.yaml max_frames:=3 log:=sim:" + PROBELESS_SOURCE_DIR +
+      "/data/scenarios/courtyard_sun.yaml aux:=true volume_size:=6.0 'volume_origin:=[-3.0, "
+      "-3.0, 0.3]' truncation:=0.08 depth_max:=6.0 " +
+      extra + " < /dev/null > /dev/null 2> " + err;
+  const int status = std::system(command.c_str());
+  std::this_thread::sleep_for(300ms);
+  stop = true;
+  drain.join();
+  *log = ReadFile(err);
+  std::remove(err.c_str());
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << *log;
+}
+
+TEST(SceneLightLaunch, FusionAuxiliaryViewsReachSceneLight) {
+  std::map<int64_t, AuxInfo> aux;
+  std::set<int64_t> light_stamps;
+  std::string log;
+  RunAuxLaunch("", &aux, &light_stamps, &log);
+  EXPECT_EQ(light_stamps.size(), 3u) << log;
+  ASSERT_EQ(aux.size(), 3u) << log;
+  for (const auto& [stamp, a] : aux) {
+    EXPECT_TRUE(light_stamps.count(stamp)) << "views of stamp " << stamp << " match no light";
+    EXPECT_EQ(a.error, "");
+    ASSERT_EQ(a.count, 3u);
+    ASSERT_EQ(a.views.size(), 3u);
+    for (uint32_t i = 0; i < 3; ++i) {
+      EXPECT_EQ(a.views[i][0], i + 1);  // left, right, top
+      EXPECT_EQ(a.views[i][1], 128u);
+      EXPECT_EQ(a.views[i][2], 128u);
+    }
+    EXPECT_GT(a.with_depth, 1000u) << "the views see the fused courtyard";
+  }
+  EXPECT_NE(log.find("auxiliary views: used for 3 frames, missing for 0, malformed for 0"),
+            std::string::npos)
+      << log;
+}
+
+TEST(SceneLightLaunch, FusionAddsTheLightViewFromSceneLight) {
+  // aux_light: frame 1 has no light yet (3 views); scene_light's estimate of frame 1 reaches
+  // fusion before frame 2 (lock-step), so frames 2 and 3 carry the light view too.
+  std::map<int64_t, AuxInfo> aux;
+  std::set<int64_t> light_stamps;
+  std::string log;
+  RunAuxLaunch("aux_light:=true", &aux, &light_stamps, &log);
+  ASSERT_EQ(aux.size(), 3u) << log;
+  std::vector<uint32_t> counts;
+  for (const auto& [stamp, a] : aux) counts.push_back(a.count);
+  EXPECT_EQ(counts, (std::vector<uint32_t>{3, 4, 4})) << log;
+  for (const auto& [stamp, a] : aux) {
+    EXPECT_EQ(a.error, "");
+    if (a.count == 4) {
+      EXPECT_EQ(a.views[3][0], 4u);  // light
+      EXPECT_EQ(a.views[3][1], 128u);
+    }
+  }
+}
+
+TEST(SceneLightLaunch, WrongTypeOnTheAuxTopicIsAOneLineError) {
+  const bus::Publisher wrong("/scene/aux", msgs::TopicTypeOf<msgs::Image>(),
+                             {.max_message_bytes = 1024});
+  const auto [status, log] = RunSceneLight("-p use_aux:=true");
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0) << log;
+  EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;
+  EXPECT_NE(log.find("probeless_msgs/AuxiliaryViews"), std::string::npos) << log;
+  EXPECT_NE(log.find("probeless_msgs/Image"), std::string::npos) << log;
+  const auto [status2, log2] = RunSceneLight("-p use_aux:=true -p mode:=depth");
+  EXPECT_TRUE(WIFEXITED(status2) && WEXITSTATUS(status2) == 2);
+  EXPECT_EQ(log2,
+            "[error] [scene_light] scene_light: use_aux needs mode gbuffer (the views come from "
+            "fusion)\n");
+}
+
+// Waits until `topic` has a live subscriber (the node under test is up).
+bool WaitForSubscriber(const std::string& topic, std::chrono::seconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < end) {
+    for (const auto& t : bus::ListTopics()) {
+      if (t.topic != topic) continue;
+      for (const auto& s : t.subscribers) {
+        if (s.alive) return true;
+      }
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  return false;
+}
+
+TEST(SceneLightLaunch, MalformedAuxiliaryViewsAreAnErrorLineNotACrash) {
+  constexpr uint32_t kW = 64, kH = 48;
+  bus::Publisher info_pub("/camera/camera_info", msgs::TopicTypeOf<msgs::CameraInfo>(),
+                          {.max_message_bytes = sizeof(msgs::CameraInfo)});
+  bus::Publisher image_pub(
+      "/camera/image", msgs::TopicTypeOf<msgs::Image>(),
+      {.max_message_bytes = msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8)});
+  bus::Publisher gbuffer_pub("/scene/gbuffer", msgs::TopicTypeOf<msgs::GeometryBuffer>(),
+                             {.max_message_bytes = msgs::GeometryBuffer::MessageBytesFor(kW, kH)});
+  bus::Publisher aux_pub("/scene/aux", msgs::TopicTypeOf<msgs::AuxiliaryViews>(),
+                         {.max_message_bytes = msgs::AuxiliaryViews::MessageBytesFor(3, 8, 8)});
+  bus::Subscriber transfers("/scene/transfer", msgs::TopicTypeOf<msgs::TransferBuffer>(),
+                            {.queue_depth = 4});
+  const std::string err = "/tmp/scene_light_aux_bad_" + std::to_string(getpid()) + ".txt";
+  const std::string pid_file = err + ".pid";
+  const std::string command = std::string(PROBELESS_BIN_DIR) +
+                              "/scene_light --ros-args -p use_aux:=true -p shadows:=false "
+                              "< /dev/null 2> " +
+                              err + " & echo $! > " + pid_file + "; wait";
+  std::thread node([&] { std::system(command.c_str()); });
+  ASSERT_TRUE(WaitForSubscriber("/scene/gbuffer", 20s));
+  ASSERT_TRUE(WaitForSubscriber("/scene/aux", 5s));
+  const int64_t stamp = 1'000'000'000;
+  {
+    bus::Loan loan = info_pub.Borrow(sizeof(msgs::CameraInfo));
+    auto m = msgs::WriteMessage<msgs::CameraInfo>(loan.data());
+    m->header.stamp_ns = stamp;
+    m->width = kW;
+    m->height = kH;
+    m->fx = m->fy = 50;
+    m->cx = (kW - 1) / 2.0;
+    m->cy = (kH - 1) / 2.0;
+    m->depth_scale = 0.001;
+    info_pub.Publish(std::move(loan));
+  }
+  {
+    bus::Loan loan = image_pub.Borrow(msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8));
+    auto m = msgs::WriteMessage<msgs::Image>(loan.data());
+    m->header.stamp_ns = stamp;
+    m->header.sequence = 1;
+    m->Init(kW, kH, msgs::Encoding::kRgb8);
+    for (uint8_t& c : msgs::ImageChannels<uint8_t>(*m, m.payload)) c = 120;
+    image_pub.Publish(std::move(loan));
+  }
+  std::this_thread::sleep_for(200ms);
+  {
+    // Declares 3 views of 128 x 128 in a slot that holds 8 x 8 ones: the size does not match.
+    bus::Loan loan = aux_pub.Borrow(msgs::AuxiliaryViews::MessageBytesFor(3, 8, 8));
+    auto m = msgs::WriteMessage<msgs::AuxiliaryViews>(loan.data());
+    m->header.stamp_ns = stamp;
+    m->view_count = 3;
+    for (uint32_t i = 0; i < 3; ++i) {
+      auto& v = m->views[i];
+      v.role = static_cast<msgs::AuxiliaryViewRole>(i + 1);
+      v.width = v.height = 128;
+      v.pixel_size_m = 0.03f;
+      v.rotation[0] = v.rotation[4] = v.rotation[8] = 1;
+    }
+    m->SetStandardLayout();
+    aux_pub.Publish(std::move(loan));
+  }
+  {
+    // A floor-like plane 1 m away facing the camera.
+    bus::Loan loan = gbuffer_pub.Borrow(msgs::GeometryBuffer::MessageBytesFor(kW, kH));
+    auto m = msgs::WriteMessage<msgs::GeometryBuffer>(loan.data());
+    m->header.stamp_ns = stamp;
+    m->header.sequence = 1;
+    m->Init(kW, kH);
+    for (float& d : msgs::DepthPlane(*m, m.payload)) d = 1.0f;
+    const std::span<float> n = msgs::NormalsPlane(*m, m.payload);
+    for (size_t p = 0; p < n.size(); p += 3) n[p + 2] = -1.0f;
+    for (uint8_t& c : msgs::ColourPlane(*m, m.payload)) c = 120;
+    gbuffer_pub.Publish(std::move(loan));
+  }
+  std::optional<bus::Sample> transfer = transfers.Take(20s);
+  pid_t pid = 0;
+  std::ifstream(pid_file) >> pid;
+  if (pid > 0) kill(pid, SIGINT);
+  node.join();
+  const std::string log = ReadFile(err);
+  std::remove(err.c_str());
+  std::remove(pid_file.c_str());
+  ASSERT_TRUE(transfer.has_value()) << "the frame was not processed: " << log;
+  EXPECT_EQ(msgs::ReadMessage<msgs::TransferBuffer>(transfer->data())->header.stamp_ns, stamp);
+  EXPECT_NE(log.find("probeless_msgs/AuxiliaryViews view 0 (left 128x128): depth plane (offset "
+                     "0, 65536 bytes) exceeds the payload of"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("(frame 1 runs without auxiliary views)"), std::string::npos) << log;
+  EXPECT_NE(log.find("malformed for 1"), std::string::npos) << log;  // ran on to a clean exit
 }
 
 }  // namespace

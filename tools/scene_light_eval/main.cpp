@@ -11,7 +11,15 @@
 // `with_sensor_noise` object. --log reads /camera/camera_info, /camera/image, /camera/depth and
 // /groundtruth/light from an MCAP log (sensor data only; normals from depth), matched by
 // header.stamp_ns (ROS 2 logs carry no sequence). --aux adds left/right/top orthographic views
-// traced from the scene (--sim).
+// traced from the scene (--sim) to the clean and sensor runs; with --fused the fused run gets the
+// reconstruction's own views instead (recon::RaycastAuxiliaryViews of the volume at the tracked
+// pose, 128 x 128, through a msgs::AuxiliaryViews message as fusion publish_aux -> scene_light
+// use_aux; none for a lost frame), their raycast time in `fused_aux_raycast_ms_median`.
+// Experiments on the traced views (docs/benchmarks/scene_light.md "Auxiliary views over the bus"):
+// --aux-roles STR keeps the views whose letter (l, r, t) is in STR, --aux-top-camera traces the top
+// view along the camera's +y (recon's convention), --aux-standoff M moves the view planes M before
+// the look-at point (extent 2 M + 1.6 m), --aux-resolution N their pixels per side (128); each
+// implies --aux.
 // Ground truth (--sim): light::SurfaceLightingTruth, the light averaged over the visible surface
 // points (what a distant-light fit to those surfaces can recover; equal to the light at the
 // camera for distant lights); --camera-truth scores against the light at the camera
@@ -74,9 +82,11 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -94,6 +104,7 @@
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
 #include "probeless/replay/sources.h"
 #include "probeless/sh/sh.h"
@@ -116,6 +127,12 @@ struct Options {
   int bands = 4;
   int threads = 2;
   bool aux = false;
+  // --aux-roles STR: keep only the traced views whose letter is in STR (l, r, t); --aux-top-camera:
+  // the traced top view along the camera's +y (recon's convention) instead of world -y.
+  std::string aux_roles = "lrt";
+  bool aux_top_camera = false;
+  float aux_standoff = -1;        // --aux-standoff M: traced views' standoff (extent 2 M + 1.6)
+  int aux_resolution = 128;       // --aux-resolution N: traced views' pixels per side
   bool camera_truth = false;      // --camera-truth: score against the light at the camera
   bool grey_world = false;        // --grey-world: one uniform albedo (no chromaticity groups)
   bool invariant_albedo = false;  // --invariant-albedo: EstimateOptions::albedo_invariant
@@ -643,6 +660,14 @@ int Run(int argc, char** argv) {
       o.threads = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--aux")
       o.aux = true;
+    else if (a == "--aux-roles")
+      o.aux = true, o.aux_roles = value();
+    else if (a == "--aux-top-camera")
+      o.aux = o.aux_top_camera = true;
+    else if (a == "--aux-resolution")
+      o.aux = true, o.aux_resolution = static_cast<int>(node::ParseNumberOption(a, value()));
+    else if (a == "--aux-standoff")
+      o.aux = true, o.aux_standoff = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--camera-truth")
       o.camera_truth = true;
     else if (a == "--grey-world")
@@ -791,6 +816,9 @@ int Run(int argc, char** argv) {
   if (o.json.empty()) throw node::UsageError("--json OUT is required");
   if (o.frames < 1) throw node::UsageError("--frames must be >= 1");
   if (o.fused_step < 1) throw node::UsageError("--fused-step must be >= 1");
+  if (o.aux_resolution < 1 || o.aux_resolution > 4096) {
+    throw node::UsageError("--aux-resolution must be in 1..4096");
+  }
   if (o.fused && !o.log.empty()) throw node::UsageError("--fused needs --sim");
   if (o.lamps < 1 || o.lamps > 2) throw node::UsageError("--lamps must be 1 or 2");
   if (o.light_model != light::LightModel::kDistant && o.temporal > 1) {
@@ -835,6 +863,7 @@ int Run(int argc, char** argv) {
     if (o.albedo_groups >= 0) v->scene.point.albedo_groups = o.albedo_groups;
   }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
+  std::vector<double> fused_aux_ms;    // --aux --fused: wall ms of the 3 orthographic raycasts
   std::vector<double> measured_noise;  // DepthGeometry's measured noise k per sensor frame
   const auto start = Clock::now();
   std::string source_name;
@@ -1070,7 +1099,22 @@ int Run(int argc, char** argv) {
       const msgs::ShLight truth =
           o.camera_truth ? camera_truth : to_msg(light::SurfaceLightingTruth(simulator.scene(), f));
       light::AuxiliaryStorage aux;
-      if (o.aux) aux = light::RenderAuxiliaryViews(simulator.scene(), f.camera, {});
+      if (o.aux) {
+        light::AuxiliaryViewOptions ao;
+        ao.top_along_camera_y = o.aux_top_camera;
+        ao.resolution = o.aux_resolution;
+        if (o.aux_standoff > 0) {
+          ao.standoff_m = o.aux_standoff;
+          ao.extent_m = 2 * o.aux_standoff + 1.6f;
+        }
+        aux = light::RenderAuxiliaryViews(simulator.scene(), f.camera, ao);
+        std::erase_if(aux.buffers.views, [&](const light::OrthographicView& v) {
+          const char c = v.role == light::AuxiliaryRole::kLeft    ? 'l'
+                         : v.role == light::AuxiliaryRole::kRight ? 'r'
+                                                                  : 't';
+          return o.aux_roles.find(c) == std::string::npos;
+        });
+      }
       const light::GeometryStorage clean_g = light::GeometryFromSimFrame(f, false);
       if (o.mix) {
         const light::GeometryStorage noisy_g = sensor_geometry_of(f);
@@ -1127,8 +1171,25 @@ int Run(int argc, char** argv) {
       if (fusion) {
         const light::GeometryStorage g = fused_geometry_of(f);
         fused_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
+        // --aux: the reconstruction's own views, through the bus message (fusion publish_aux ->
+        // scene_light use_aux); none for a lost frame, as in the node.
+        light::AuxiliaryBuffers fused_aux;
+        std::unique_ptr<std::byte, decltype(&std::free)> aux_slot(nullptr, &std::free);
+        if (o.aux && last_fusion.state != recon::TrackingState::kLost) {
+          const auto t0 = Clock::now();
+          const std::vector<recon::AuxiliaryRaycast> views = recon::RaycastAuxiliaryViews(
+              fusion->volume(), last_fusion.camera_to_world, 128, nullptr, fusion->pool());
+          fused_aux_ms.push_back(
+              std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+          const size_t bytes = msgs::AuxiliaryViews::MessageBytesFor(3, 128, 128);
+          aux_slot.reset(static_cast<std::byte*>(std::aligned_alloc(64, bytes)));
+          auto m =
+              msgs::WriteMessage<msgs::AuxiliaryViews>(std::span<std::byte>(aux_slot.get(), bytes));
+          recon::WriteAuxiliaryViews(last_fusion.camera_to_world, views, *m, m.payload);
+          fused_aux = light::AuxiliaryFromMessage(*m, m.payload);
+        }
         for (Variant* v : {&full, &fast}) {
-          v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
+          v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, fused_aux, truth,
                                               f.time_s, &camera_truth, temporal_of(v, 2), rot,
                                               nullptr, g.reliability, tracker_of(v, 2)));
         }
@@ -1254,8 +1315,13 @@ int Run(int argc, char** argv) {
   if (!out) throw node::UsageError("cannot write '" + o.json + "'");
   out << "{\n  \"source\": \"" << source_name << "\",\n  \"directions\": " << o.directions
       << ",\n  \"bands\": " << o.bands << ",\n  \"threads\": " << o.threads
-      << ",\n  \"aux_views\": " << (o.aux ? "true" : "false") << ",\n  \"truth\": \""
-      << (o.log.empty() && !o.camera_truth ? "surface" : "camera") << "\""
+      << ",\n  \"aux_views\": " << (o.aux ? "true" : "false");
+  if (!fused_aux_ms.empty()) {
+    std::vector<double> ms = fused_aux_ms;
+    std::nth_element(ms.begin(), ms.begin() + ms.size() / 2, ms.end());
+    out << ",\n  \"fused_aux_raycast_ms_median\": " << ms[ms.size() / 2];
+  }
+  out << ",\n  \"truth\": \"" << (o.log.empty() && !o.camera_truth ? "surface" : "camera") << "\""
       << ",\n  \"albedo_groups\": " << eo.albedo_groups
       << ",\n  \"albedo_invariant\": " << (eo.albedo_invariant ? "true" : "false")
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")

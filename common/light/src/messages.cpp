@@ -44,6 +44,41 @@ GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const
   return view;
 }
 
+AuxiliaryBuffers AuxiliaryFromMessage(const msgs::AuxiliaryViews& message,
+                                      std::span<const std::byte> payload) {
+  message.Validate(payload.size());
+  AuxiliaryBuffers out;
+  for (uint32_t i = 0; i < message.view_count; ++i) {
+    const msgs::AuxiliaryView& m = message.views[i];
+    OrthographicView v;
+    switch (m.role) {
+      case msgs::AuxiliaryViewRole::kLeft:
+        v.role = AuxiliaryRole::kLeft;
+        break;
+      case msgs::AuxiliaryViewRole::kRight:
+        v.role = AuxiliaryRole::kRight;
+        break;
+      case msgs::AuxiliaryViewRole::kTop:
+        v.role = AuxiliaryRole::kTop;
+        break;
+      case msgs::AuxiliaryViewRole::kLight:
+        v.role = AuxiliaryRole::kLight;
+        break;
+      default:
+        v.role = AuxiliaryRole::kOther;
+        break;
+    }
+    v.width = static_cast<int>(m.width);
+    v.height = static_cast<int>(m.height);
+    v.pixel_size_m = m.pixel_size_m;
+    for (int k = 0; k < 9; ++k) v.rotation[k] = m.rotation[k];
+    for (int k = 0; k < 3; ++k) v.translation[k] = m.translation[k];
+    v.depth = msgs::AuxiliaryDepth(message, payload, i);
+    out.views.push_back(v);
+  }
+  return out;
+}
+
 void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
                             const msgs::CameraInfo& info, std::vector<float>* depth_m,
                             std::vector<float>* normals, const DepthGeometryOptions& options,

@@ -54,7 +54,8 @@ AuxiliaryStorage RenderAuxiliaryViews(const raytrace::Scene& scene, const raytra
   if (options.left_right_top) {
     specs.push_back({AuxiliaryRole::kLeft, c2w.ApplyDirection({1, 0, 0})});
     specs.push_back({AuxiliaryRole::kRight, c2w.ApplyDirection({-1, 0, 0})});
-    specs.push_back({AuxiliaryRole::kTop, {0, -1, 0}});
+    specs.push_back({AuxiliaryRole::kTop,
+                     options.top_along_camera_y ? c2w.ApplyDirection({0, 1, 0}) : Vec3{0, -1, 0}});
   }
   if (options.light_view) {
     const auto& l = options.light_direction;

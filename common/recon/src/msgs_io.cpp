@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <string>
 
 #include "probeless/recon/preprocess.h"
 
@@ -127,6 +128,73 @@ void WriteGeometryBuffer(const DepthImage& depth, const Vec3Image& normals,
         dst[3 * x + 2] = row[3 * x];
       }
     }
+  }
+}
+
+std::vector<AuxiliaryRaycast> RaycastAuxiliaryViews(const TsdfVolume& volume,
+                                                    const Pose& camera_to_world, int pixels,
+                                                    const Vec3f* light_direction_world,
+                                                    ThreadPool* pool) {
+  if (pixels < 1 || pixels > static_cast<int>(msgs::kMaxAuxiliaryViewPixels)) {
+    throw ReconError("auxiliary views: pixels must be in 1..4096, got " + std::to_string(pixels));
+  }
+  const AuxiliaryViews lrt = volume.AuxiliaryViewsFor(camera_to_world, pixels);
+  std::vector<AuxiliaryRaycast> out(light_direction_world ? 4 : 3);
+  out[0].role = msgs::AuxiliaryViewRole::kLeft;
+  out[0].view = lrt.left;
+  out[1].role = msgs::AuxiliaryViewRole::kRight;
+  out[1].view = lrt.right;
+  out[2].role = msgs::AuxiliaryViewRole::kTop;
+  out[2].view = lrt.top;
+  if (light_direction_world) {
+    out[3].role = msgs::AuxiliaryViewRole::kLight;
+    out[3].view = volume.LightView(*light_direction_world, pixels);
+  }
+  GeometryView g;
+  for (AuxiliaryRaycast& a : out) {
+    volume.RaycastOrthographic(a.view, g, pool);
+    a.depth = std::move(g.depth);
+  }
+  return out;
+}
+
+Pose AuxiliaryViewToCamera(const Pose& camera_to_world, const OrthographicView& view) {
+  return camera_to_world.Inverse() * view.view_to_world;
+}
+
+void WriteAuxiliaryViews(const Pose& camera_to_world, const std::vector<AuxiliaryRaycast>& views,
+                         msgs::AuxiliaryViews& out, std::span<std::byte> payload) {
+  if (views.size() > msgs::kMaxAuxiliaryViews) {
+    throw ReconError("auxiliary views: at most 4 views, got " + std::to_string(views.size()));
+  }
+  out.view_count = static_cast<uint32_t>(views.size());
+  for (size_t i = 0; i < views.size(); ++i) {
+    const AuxiliaryRaycast& a = views[i];
+    if (a.depth.width != a.view.width || a.depth.height != a.view.height) {
+      throw ReconError("auxiliary views: view " + std::to_string(i) + " is " +
+                       std::to_string(a.view.width) + "x" + std::to_string(a.view.height) +
+                       " but its depth " + std::to_string(a.depth.width) + "x" +
+                       std::to_string(a.depth.height));
+    }
+    msgs::AuxiliaryView& v = out.views[i];
+    v = {};
+    v.role = a.role;
+    v.width = static_cast<uint32_t>(a.view.width);
+    v.height = static_cast<uint32_t>(a.view.height);
+    v.pixel_size_m = a.view.pixel_size_m;
+    const Pose v2c = AuxiliaryViewToCamera(camera_to_world, a.view);
+    for (int k = 0; k < 9; ++k) v.rotation[k] = static_cast<float>(v2c.r[k]);
+    for (int k = 0; k < 3; ++k) v.translation[k] = static_cast<float>(v2c.t[k]);
+  }
+  for (size_t i = views.size(); i < msgs::kMaxAuxiliaryViews; ++i) out.views[i] = {};
+  out.SetStandardLayout();
+  if (payload.size() < out.PayloadBytes()) {
+    throw ReconError("auxiliary views: payload of " + std::to_string(payload.size()) +
+                     " bytes, need " + std::to_string(out.PayloadBytes()));
+  }
+  for (size_t i = 0; i < views.size(); ++i) {
+    std::memcpy(payload.data() + out.views[i].depth_offset, views[i].depth.data.data(),
+                out.views[i].DepthPlaneBytes());
   }
 }
 

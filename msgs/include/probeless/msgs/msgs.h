@@ -1,6 +1,7 @@
 // All probeless message types (see docs/messages.md).
 #pragma once
 
+#include "probeless/msgs/auxiliary_views.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/face_observation.h"
 #include "probeless/msgs/geometry.h"

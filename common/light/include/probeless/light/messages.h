@@ -11,6 +11,7 @@
 #include "probeless/light/estimate.h"
 #include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
+#include "probeless/msgs/auxiliary_views.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/geometry_buffer.h"
 #include "probeless/msgs/image.h"
@@ -28,6 +29,12 @@ Intrinsics IntrinsicsFrom(const msgs::CameraInfo& info, int width, int height);
 // intrinsics or a buffer without any normal where there is depth ("missing normals").
 GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
                                   const msgs::CameraInfo& info);
+
+// The auxiliary views of a msgs::AuxiliaryViews message (the OrthographicView contract is the
+// message's), borrowing its depth planes from `payload` (the sample's). Throws msgs::MessageError
+// (one line) for a malformed message.
+AuxiliaryBuffers AuxiliaryFromMessage(const msgs::AuxiliaryViews& message,
+                                      std::span<const std::byte> payload);
 
 // A G-buffer from a depth16 (or float32 metres) image: depth in metres (depth_scale of `info`,
 // 0.001 when unset for depth16) and normals by DepthGeometry (`options`; default kAuto: a clean

@@ -49,11 +49,16 @@ struct AuxiliaryViewOptions {
   float standoff_m = 1.2f;      // view origin plane: centre - view direction * this (near plane)
   bool left_right_top = true;   // the paper's three views
   bool light_view = false;      // plus one looking along -light_direction (camera frame)
+  // false: the top view looks along world -y (down); true: along the camera's +y (downwards in
+  // the image), the convention of recon::TsdfVolume::AuxiliaryViewsFor and msgs::AuxiliaryViews,
+  // which know no gravity (they differ when the camera is pitched or rolled).
+  bool top_along_camera_y = false;
   Vec3f light_direction{0, -1, 0};
 };
 
 // Traces the auxiliary views of the committed `scene` for `camera` (orthographic, see
-// OrthographicView): left and right look along the camera's +x / -x, top along world -y (down),
+// OrthographicView): left and right look along the camera's +x / -x, top along world -y (down;
+// or the camera's +y with top_along_camera_y),
 // the light view along -light_direction. Each view_to_camera is exact.
 AuxiliaryStorage RenderAuxiliaryViews(const raytrace::Scene& scene, const raytrace::Camera& camera,
                                       const AuxiliaryViewOptions& options,

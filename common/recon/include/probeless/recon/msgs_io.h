@@ -4,11 +4,14 @@
 
 #include <cstddef>
 #include <span>
+#include <vector>
 
+#include "probeless/msgs/auxiliary_views.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/geometry_buffer.h"
 #include "probeless/msgs/image.h"
 #include "probeless/recon/math.h"
+#include "probeless/recon/tsdf_volume.h"
 
 namespace probeless::recon {
 
@@ -34,5 +37,36 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
 void WriteGeometryBuffer(const DepthImage& depth, const Vec3Image& normals,
                          const msgs::Image* image, std::span<const std::byte> image_payload,
                          msgs::GeometryBuffer& out, std::span<std::byte> payload);
+
+// One raycast auxiliary view (§5.1) of the volume: its role, its geometry (view -> world) and the
+// depth along its rays (metres from the view plane, 0 = none).
+struct AuxiliaryRaycast {
+  msgs::AuxiliaryViewRole role = msgs::AuxiliaryViewRole::kInvalid;
+  OrthographicView view;
+  DepthImage depth;
+};
+
+// The views a G_r of a camera at `camera_to_world` needs: left, right and top
+// (TsdfVolume::AuxiliaryViewsFor) and, if `light_direction_world` is given (unit vector towards
+// the light, world frame), the light view (TsdfVolume::LightView), each `pixels` square, raycast
+// with TsdfVolume::RaycastOrthographic. Throws ReconError for pixels < 1 or > 4096 or a bad
+// light direction.
+std::vector<AuxiliaryRaycast> RaycastAuxiliaryViews(const TsdfVolume& volume,
+                                                    const Pose& camera_to_world, int pixels,
+                                                    const Vec3f* light_direction_world,
+                                                    ThreadPool* pool);
+
+// view -> camera of an orthographic view for a camera at `camera_to_world`:
+// inverse(camera_to_world) * view.view_to_world (the msgs::AuxiliaryView / light::OrthographicView
+// contract: p_camera = R p_view + t).
+Pose AuxiliaryViewToCamera(const Pose& camera_to_world, const OrthographicView& view);
+
+// Fills `out` (header left to the caller) with up to 4 `views` in the standard layout: roles,
+// sizes, pixel sizes, view -> camera (AuxiliaryViewToCamera) and depth planes. `payload` must
+// hold out.PayloadBytes() (msgs::AuxiliaryViews::MessageBytesFor(count, pixels, pixels) minus the
+// struct). Throws ReconError for more than 4 views, a depth image whose size differs from its
+// view's or a payload too small.
+void WriteAuxiliaryViews(const Pose& camera_to_world, const std::vector<AuxiliaryRaycast>& views,
+                         msgs::AuxiliaryViews& out, std::span<std::byte> payload);
 
 }  // namespace probeless::recon
