@@ -33,8 +33,9 @@
 //   light::NormalsWithReliability; "central": SmoothDepth w / 80 + NormalsFromDepth), smooth_radius
 //   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
 //   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r),
-//   shadows (true in gbuffer mode, false in depth mode: the distant light's direction refined by
-//   cast shadows, light::RefineLightWithShadows; not with temporal_frames > 1), shadow_stride (8),
+//   shadows (true with subsample 1: the distant light's direction refined by cast shadows,
+//   light::RefineLightWithShadows; not with temporal_frames > 1), shadow_image_cues (true in depth
+//   mode: ShadowOptions::image_cues, light::RawDepthShadowOptions), shadow_stride (8),
 //   use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes with
 //   publish_aux on `scene/aux` (msgs::AuxiliaryViews) take part in the transfer's occlusion test;
 //   the views with the G_r's stamp are used, waiting at most aux_wait_ms (50) for them; without a
@@ -119,11 +120,13 @@ int Run(int argc, char** argv) {
   so.point.albedo = eo.albedo;
   so.point.albedo_groups = eo.albedo_groups;
   so.point.max_lamps = node.Param("lamps", 1);
-  // Cast shadows: on by default for fusion's G_r (fused courtyard_sun 36.8 -> 7.6 deg), off on raw
-  // sensor depth, where quantisation fakes occluders (12 consecutive courtyard frames: 22.5 -> 43.6
-  // deg), and off for OursFast (the search's ~10 ms wall would break its 15 ms budget);
-  // docs/light.md "Cast shadows".
-  so.shadow.enabled = node.Param("shadows", mode == "gbuffer" && to.subsample == 1);
+  // Cast shadows: on by default for the full variant (fused courtyard_sun 36.8 -> 7.6 deg), off for
+  // OursFast (the search's ~10 ms wall would break its 15 ms budget). On raw sensor depth (depth
+  // mode) only with the image cues (shadow_image_cues, default on in depth mode): without them
+  // quantised depth lets a wrong occluder explain a shadow (12 consecutive courtyard frames:
+  // 22.5 -> 43.6 deg; with them 6.5 deg); docs/light.md "Cast shadows".
+  so.shadow.enabled = node.Param("shadows", to.subsample == 1);
+  so.shadow.image_cues = node.Param("shadow_image_cues", mode == "depth");
   so.shadow.stride = node.Param("shadow_stride", 8);
   so.shadow.threads = to.threads;
   if (so.shadow.stride < 1) {

@@ -192,6 +192,11 @@ struct Options {
   bool shadows = light::ShadowOptions{}.enabled;
   bool fast_shadows = false;  // --fast-shadows: the shadow search for OursFast too
   light::ShadowOptions shadow;
+  // The search's image cues (ShadowOptions::image_cues; round 5) for which inputs: `depth` (the
+  // default, as the node: raw sensor depth, light::RawDepthShadowOptions), `all` (also the clean
+  // render and fused G_r), `none` (round 4). Tuning: --shadow-dark-weight, --shadow-dark-ratio,
+  // --shadow-boundary-ref, --shadow-boundary-ratio.
+  std::string shadow_cues = "depth";
 };
 
 // One evaluated frame of one variant.
@@ -224,6 +229,8 @@ struct Sample {
   double shadow_score = NAN, shadow_unshadowed = NAN, shadow_dir_error_deg = NAN;
   double shadow_contrast = NAN, shadow_truth_score = NAN, shadow_runner_up = NAN;
   double cpu_ms_shadow = NAN;
+  // The image cue (light::MaskAgreement) under the search's direction and under the truth.
+  light::MaskAgreement shadow_mask, shadow_truth_mask;
 };
 
 struct Series {
@@ -294,7 +301,9 @@ struct Variant {
   light::TransferComputer computer;
   light::EstimateOptions estimate;
   light::SceneLightOptions scene;  // --light-model: scene.distant = estimate
-  light::TransferResult result;    // reused across frames, as the node does
+  // The shadow options of the sensor-depth input (--shadow-cues); scene.shadow's for the others.
+  light::ShadowOptions shadow_depth;
+  light::TransferResult result;  // reused across frames, as the node does
   Series clean, noisy, fused;
   std::array<Series, 7> mix;  // --mix: clean geometry + sensor colour; sensor geometry + clean
                               // colour; clean normals and depth where the sensor has depth;
@@ -450,6 +459,12 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
       s.shadow_truth_score =
           light::ShadowScore(g, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+      s.shadow_truth_mask =
+          light::ShadowMaskAgreement(g, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+    }
+    const light::Vec3f& sd = shadow.direction;
+    if (sd[0] != 0 || sd[1] != 0 || sd[2] != 0) {
+      s.shadow_mask = light::ShadowMaskAgreement(g, grey, v.scene.shadow, colour, sd);
     }
   }
   for (int k = 0; k < 3; ++k) {
@@ -752,6 +767,20 @@ int Run(int argc, char** argv) {
       o.shadow.depth_bias_rel = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-thickness")
       o.shadow.thickness_m = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-cues") {
+      o.shadow_cues = value();
+      if (o.shadow_cues != "depth" && o.shadow_cues != "all" && o.shadow_cues != "none") {
+        throw node::UsageError("--shadow-cues must be depth, all or none, got '" + o.shadow_cues +
+                               "'");
+      }
+    } else if (a == "--shadow-dark-ratio")
+      o.shadow.mask_dark_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-dark-weight")
+      o.shadow.unexplained_dark_weight = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-boundary-ref")
+      o.shadow.boundary_ref = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-boundary-ratio")
+      o.shadow.boundary_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-chroma")
       o.shadow.chroma_cells = static_cast<int>(node::ParseNumberOption(a, value()));
     else if (a == "--lamps")
@@ -853,6 +882,9 @@ int Run(int argc, char** argv) {
     v->scene.shadow = o.shadow;
     // OursFast keeps its 15 ms budget: shadows only with --fast-shadows (as the node's default).
     v->scene.shadow.enabled = o.shadows && (v == &full || o.fast_shadows);
+    v->scene.shadow.image_cues = o.shadow_cues == "all";
+    v->shadow_depth = v->scene.shadow;
+    v->shadow_depth.image_cues = o.shadow_cues != "none";
     if (o.point_rows > 0) v->scene.point.max_rows = o.point_rows;
     if (o.screen_rows >= 0) v->scene.point.screen_rows = o.screen_rows;
     if (o.screen_lm > 0) v->scene.point.screen_lm_iterations = o.screen_lm;
@@ -1161,11 +1193,14 @@ int Run(int argc, char** argv) {
         const light::GeometryStorage g = sensor ? sensor_geometry_of(f) : clean_g;
         if (sensor) sensor_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
         for (Variant* v : {&full, &fast}) {
+          const light::ShadowOptions shadow = v->scene.shadow;
+          if (sensor) v->scene.shadow = v->shadow_depth;
           (sensor ? v->noisy : v->clean)
               .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
                                           f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
                                           rot, &true_lamps, g.reliability,
                                           tracker_of(v, sensor ? 1 : 0)));
+          v->scene.shadow = shadow;
         }
       }
       if (fusion) {
@@ -1213,14 +1248,25 @@ int Run(int argc, char** argv) {
             c.truth_dir[0], c.truth_dir[1], c.truth_dir[2], c.estimate_dir[0], c.estimate_dir[1],
             c.estimate_dir[2], n.estimate_dir[0], n.estimate_dir[1], n.estimate_dir[2]);
         if (o.shadows) {
-          for (const Sample* x : {&c, &n}) {
+          const Sample* f =
+              o.fused && !full.fused.samples.empty() ? &full.fused.samples.back() : nullptr;
+          for (const Sample* x : {&c, &n, f}) {
+            if (x == nullptr) continue;
             std::fprintf(stderr,
                          "\n  shadows %s: %s score %.3f unshadowed %.3f contrast %.2f, shadow dir "
-                         "%.1f deg off, %.1f ms, score at truth %.3f, runner-up %.3f",
-                         x == &c ? "clean" : "sensor", x->shadow_valid ? "accepted" : "rejected",
-                         x->shadow_score, x->shadow_unshadowed, x->shadow_contrast,
-                         x->shadow_dir_error_deg, x->cpu_ms_shadow, x->shadow_truth_score,
-                         x->shadow_runner_up);
+                         "%.1f deg off, %.1f ms, score at truth %.3f, runner-up %.3f, mask "
+                         "precision / recall %.2f / %.2f (at truth %.2f / %.2f) boundary %.2f "
+                         "%d (at truth %.2f %d)",
+                         x == &c   ? "clean"
+                         : x == &n ? "sensor"
+                                   : "fused",
+                         x->shadow_valid ? "accepted" : "rejected", x->shadow_score,
+                         x->shadow_unshadowed, x->shadow_contrast, x->shadow_dir_error_deg,
+                         x->cpu_ms_shadow, x->shadow_truth_score, x->shadow_runner_up,
+                         x->shadow_mask.precision, x->shadow_mask.recall,
+                         x->shadow_truth_mask.precision, x->shadow_truth_mask.recall,
+                         x->shadow_mask.boundary_precision, x->shadow_mask.boundaries,
+                         x->shadow_truth_mask.boundary_precision, x->shadow_truth_mask.boundaries);
           }
         }
         if (o.light_model != light::LightModel::kDistant) {
@@ -1301,6 +1347,7 @@ int Run(int argc, char** argv) {
       const Pending& p = frames[seq];
       const light::GeometryView g{p.w, p.h, p.k, p.depth, p.normals, {}};
       for (Variant* v : {&full, &fast}) {
+        v->scene.shadow = v->shadow_depth;  // a log's depth is the sensor's
         v->noisy.samples.push_back(RunFrame(*v, g, greys[seq], colours[seq], {}, truths[seq],
                                             p.time_s, nullptr, nullptr, nullptr, nullptr, {},
                                             o.point_warm ? &v->trackers[1] : nullptr));
@@ -1327,7 +1374,8 @@ int Run(int argc, char** argv) {
       << ",\n  \"analytic_unoccluded\": " << (o.quadrature ? "false" : "true")
       << ",\n  \"max_rows_per_bin\": " << eo.max_rows_per_bin << ",\n  \"light_model\": \""
       << light::LightModelName(o.light_model) << "\",\n  \"lamps\": " << o.lamps
-      << ",\n  \"shadows\": " << (o.shadows ? "true" : "false")
+      << ",\n  \"shadows\": " << (o.shadows ? "true" : "false") << ",\n  \"shadow_cues\": \""
+      << o.shadow_cues << "\""
       << ",\n  \"temporal_frames\": " << o.temporal << ",\n  \"forgetting\": " << Num(o.forgetting)
       << ",\n  \"normal_filter\": "
       << (o.normal_filter

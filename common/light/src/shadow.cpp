@@ -16,10 +16,11 @@ namespace probeless::light {
 namespace {
 
 struct Point {
-  float x, y, z;     // camera frame, metres
-  float nx, ny, nz;  // unit normal
-  float intensity;   // linear grey
-  int group;         // compact group index
+  float x, y, z;      // camera frame, metres
+  float nx, ny, nz;   // unit normal
+  float intensity;    // linear grey
+  int group;          // compact group index
+  bool dark = false;  // observed dark: below mask_dark_ratio x its group's lit level
 };
 
 struct PointSet {
@@ -27,6 +28,9 @@ struct PointSet {
   int groups = 0;
   std::vector<double> sum_i, sum_ii;  // per group, independent of the direction
   std::vector<int> count;
+  // The points' lattice (every stride-th pixel): cell (i, j) -> point index or -1.
+  int grid_w = 0, grid_h = 0;
+  std::vector<int> grid;
 };
 
 float SrgbToLinear(uint8_t v) {
@@ -57,7 +61,7 @@ PointSet CollectPoints(const GeometryView& g, std::span<const float> intensity,
   for (int v = 0; v < 256; ++v) lut[v] = SrgbToLinear(static_cast<uint8_t>(v));
   const bool chroma = !colour.empty() && o.chroma_cells > 0;
   std::vector<Point> raw;
-  std::vector<int> keys;
+  std::vector<int> keys, cells;
   for (int v = stride / 2; v < g.height; v += stride) {
     for (int u = stride / 2; u < g.width; u += stride) {
       const size_t i = static_cast<size_t>(v) * g.width + u;
@@ -84,6 +88,7 @@ PointSet CollectPoints(const GeometryView& g, std::span<const float> intensity,
       }
       raw.push_back(p);
       keys.push_back(key);
+      cells.push_back((v / stride) * (g.width / stride + 1) + u / stride);
     }
   }
   std::unordered_map<int, int> sizes;
@@ -91,12 +96,31 @@ PointSet CollectPoints(const GeometryView& g, std::span<const float> intensity,
   // Compact indices in order of first appearance (deterministic).
   std::unordered_map<int, int> index;
   PointSet set;
+  set.grid_w = g.width / stride + 1;
+  set.grid_h = g.height / stride + 1;
+  set.grid.assign(static_cast<size_t>(set.grid_w) * set.grid_h, -1);
   for (size_t j = 0; j < raw.size(); ++j) {
     if (sizes[keys[j]] < o.min_group_points) continue;
     auto [it, inserted] = index.emplace(keys[j], set.groups);
     if (inserted) ++set.groups;
     raw[j].group = it->second;
+    set.grid[cells[j]] = static_cast<int>(set.points.size());
     set.points.push_back(raw[j]);
+  }
+  // Observed shadow mask (direction-independent): a point is dark when its intensity is below
+  // mask_dark_ratio x its group's lit level, the group's lit_quantile intensity (same
+  // chromaticity and normal bin: same albedo and nearly the same n.l, less light).
+  {
+    std::vector<std::vector<float>> values(set.groups);
+    for (const Point& p : set.points) values[p.group].push_back(p.intensity);
+    std::vector<float> level(set.groups, 0);
+    for (int gi = 0; gi < set.groups; ++gi) {
+      auto& v = values[gi];
+      const size_t k = std::min(v.size() - 1, static_cast<size_t>(o.lit_quantile * v.size()));
+      std::nth_element(v.begin(), v.begin() + k, v.end());
+      level[gi] = v[k];
+    }
+    for (Point& p : set.points) p.dark = p.intensity < o.mask_dark_ratio * level[p.group];
   }
   set.sum_i.assign(set.groups, 0);
   set.sum_ii.assign(set.groups, 0);
@@ -156,38 +180,111 @@ class Scorer {
   }
 
   // The explained fraction of the within-group variance (shadow.h), with or without shadows.
+  // With the image cues (options.image_cues): a point observed dark that l predicts lit (its
+  // darkness unexplained: possibly the shadow of an occluder out of view or missing from the
+  // depth) weighs unexplained_dark_weight in the fit and in the total, and the score is
+  // multiplied by min(1, b / boundary_ref), b the fraction of l's predicted shadow boundaries
+  // seen in the image (Boundaries).
   float Score(const PointSet& s, const Vec3f& l, bool shadows) const {
+    const bool cues = shadows && o_.image_cues;
     std::vector<double> sp(s.groups, 0), spp(s.groups, 0), sip(s.groups, 0);
-    std::vector<double> si(s.sum_i), sii(s.sum_ii);
-    std::vector<int> count(s.count);
-    for (const Point& p : s.points) {
+    std::vector<double> si(s.sum_i), sii(s.sum_ii);  // the fit's sums of I, I^2 and weights
+    std::vector<double> count(s.count.begin(), s.count.end());
+    std::vector<double> ti(s.sum_i), tii(s.sum_ii);  // the total's (unknown points stay in it)
+    std::vector<double> tn(s.count.begin(), s.count.end());
+    std::vector<float> vis;  // per point: V for the boundaries, -1 = not counted
+    if (cues) vis.assign(s.points.size(), -1.0f);
+    for (size_t j = 0; j < s.points.size(); ++j) {
+      const Point& p = s.points[j];
       const float c = p.nx * l[0] + p.ny * l[1] + p.nz * l[2];
       if (c <= 0) continue;  // p = 0: adds nothing to the sums below
       const float v = shadows ? Visible(p, l) : 1.0f;
+      if (cues && c > o_.mask_min_cos) vis[j] = v;
+      const double in = p.intensity;
       if (v < 0) {  // unknown: out of this direction's fit
-        si[p.group] -= p.intensity;
-        sii[p.group] -= static_cast<double>(p.intensity) * p.intensity;
+        si[p.group] -= in;
+        sii[p.group] -= in * in;
         --count[p.group];
         continue;
       }
-      const float x = c * v;
-      sp[p.group] += x;
-      spp[p.group] += static_cast<double>(x) * x;
-      sip[p.group] += static_cast<double>(x) * p.intensity;
+      double w = 1;
+      if (cues && v > 0 && p.dark) {
+        w = o_.unexplained_dark_weight;
+        const double drop = 1 - w;
+        si[p.group] -= drop * in, ti[p.group] -= drop * in;
+        sii[p.group] -= drop * in * in, tii[p.group] -= drop * in * in;
+        count[p.group] -= drop, tn[p.group] -= drop;
+      }
+      const double x = c * v;
+      sp[p.group] += w * x;
+      spp[p.group] += w * x * x;
+      sip[p.group] += w * x * in;
     }
     // The denominator is over all points: leaving unknown points out must not raise the score.
     double explained = 0, total = 0;
     for (int gi = 0; gi < s.groups; ++gi) {
-      const double n_all = s.count[gi];
-      total += std::max(0.0, s.sum_ii[gi] - s.sum_i[gi] * s.sum_i[gi] / n_all);
+      if (tn[gi] > 0.5) total += std::max(0.0, tii[gi] - ti[gi] * ti[gi] / tn[gi]);
       const double n = count[gi];
-      if (n < 2) continue;
+      if (n < 1.5) continue;
       const double syy = sii[gi] - si[gi] * si[gi] / n;
       const double sxx = spp[gi] - sp[gi] * sp[gi] / n;
       const double sxy = sip[gi] - sp[gi] * si[gi] / n;
       if (sxy > 0 && sxx > 1e-9 * n) explained += std::min(sxy * sxy / sxx, std::max(0.0, syy));
     }
-    return total > 0 ? static_cast<float>(explained / total) : 0.0f;
+    double factor = 1;
+    if (cues && o_.boundary_ref > 0) {
+      const auto [pairs, seen] = Boundaries(s, vis);
+      factor = std::min(1.0, (seen + 1.0) / (pairs + 2.0) / o_.boundary_ref);
+    }
+    return total > 0 ? static_cast<float>(factor * explained / total) : 0.0f;
+  }
+
+  // Predicted shadow boundaries: 4-neighbours on the points' lattice, in one group, both with
+  // known visibility (vis >= 0), one predicted lit and one shadowed. Returns their number and
+  // how many of them the image shows: the lit one brighter than boundary_ratio x the shadowed one.
+  std::pair<int, int> Boundaries(const PointSet& s, const std::vector<float>& vis) const {
+    int pairs = 0, seen = 0;
+    for (int gy = 0; gy < s.grid_h; ++gy) {
+      for (int gx = 0; gx < s.grid_w; ++gx) {
+        const int a = s.grid[gy * s.grid_w + gx];
+        if (a < 0 || vis[a] < 0) continue;
+        for (const int b : {gx + 1 < s.grid_w ? s.grid[gy * s.grid_w + gx + 1] : -1,
+                            gy + 1 < s.grid_h ? s.grid[(gy + 1) * s.grid_w + gx] : -1}) {
+          if (b < 0 || vis[b] < 0 || vis[a] == vis[b]) continue;
+          if (s.points[a].group != s.points[b].group) continue;
+          const float lit = s.points[vis[a] > 0 ? a : b].intensity;
+          const float dark = s.points[vis[a] > 0 ? b : a].intensity;
+          ++pairs;
+          if (lit > o_.boundary_ratio * dark) ++seen;
+        }
+      }
+    }
+    return {pairs, seen};
+  }
+
+  // Predicted vs observed shadow mask under l (shadow.h, MaskAgreement), over the points with
+  // n.l > mask_min_cos whose visibility is known.
+  MaskAgreement Mask(const PointSet& s, const Vec3f& l) const {
+    std::vector<float> vis(s.points.size(), -1.0f);
+    int predicted = 0, observed = 0, both = 0;
+    for (size_t j = 0; j < s.points.size(); ++j) {
+      const Point& p = s.points[j];
+      if (p.nx * l[0] + p.ny * l[1] + p.nz * l[2] <= o_.mask_min_cos) continue;
+      vis[j] = Visible(p, l);
+      if (vis[j] < 0) continue;
+      predicted += vis[j] == 0 ? 1 : 0;
+      observed += p.dark ? 1 : 0;
+      both += vis[j] == 0 && p.dark ? 1 : 0;
+    }
+    MaskAgreement m;
+    m.predicted = predicted;
+    m.observed = observed;
+    m.precision = predicted > 0 ? static_cast<float>(both) / predicted : 0.0f;
+    m.recall = observed > 0 ? static_cast<float>(both) / observed : 0.0f;
+    const auto [pairs, seen] = Boundaries(s, vis);
+    m.boundaries = pairs;
+    m.boundary_precision = pairs > 0 ? static_cast<float>(seen) / pairs : 0.0f;
+    return m;
   }
 
   // Lit / shadowed contrast under l: exp of the mean over groups (weighted by the smaller side's
@@ -277,6 +374,12 @@ void Check(const GeometryView& g, std::span<const float> intensity, std::span<co
       {o.chroma_cells >= 0 && o.min_group_points >= 2,
        "chroma_cells must be >= 0 and min_group_points >= 2"},
       {o.threads >= 1, "threads must be >= 1"},
+      {o.mask_dark_ratio > 0 && o.mask_dark_ratio < 1 && o.lit_quantile >= 0 && o.lit_quantile <= 1,
+       "mask_dark_ratio must be in (0, 1) and lit_quantile in [0, 1]"},
+      {o.unexplained_dark_weight >= 0 && o.unexplained_dark_weight <= 1,
+       "unexplained_dark_weight must be in [0, 1]"},
+      {o.boundary_ratio > 1 && o.boundary_ref > 0 && o.boundary_ref <= 1,
+       "boundary_ratio must be > 1 and boundary_ref in (0, 1]"},
   };
   for (const auto& [ok, message] : rules) {
     if (!ok) throw LightError(f + message);
@@ -400,6 +503,20 @@ float ShadowScore(const GeometryView& g, std::span<const float> intensity,
   const Scorer scorer(g, options);
   const PointSet set = CollectPoints(g, intensity, colour, options.stride, options);
   return scorer.Score(set, Normalised(direction[0], direction[1], direction[2]), shadows);
+}
+
+MaskAgreement ShadowMaskAgreement(const GeometryView& g, std::span<const float> intensity,
+                                  const ShadowOptions& options, std::span<const uint8_t> colour,
+                                  const Vec3f& direction) {
+  Check(g, intensity, colour, options);
+  const Scorer scorer(g, options);
+  const PointSet set = CollectPoints(g, intensity, colour, options.stride, options);
+  return scorer.Mask(set, Normalised(direction[0], direction[1], direction[2]));
+}
+
+ShadowOptions RawDepthShadowOptions(ShadowOptions base) {
+  base.image_cues = true;
+  return base;
 }
 
 void RotateLightTo(const Vec3f& direction, LightEstimate* light) {

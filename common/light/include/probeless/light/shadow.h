@@ -59,11 +59,40 @@ struct ShadowOptions {
   // ... and the best refined candidate at least 20 deg away (candidates >= 2) must score at most
   // max_runner_up x the best (else the shadows are ambiguous).
   float max_runner_up = 0.9f;
+  // Image cues (off by default: the library's and fusion's G_r path; on for raw sensor depth,
+  // RawDepthShadowOptions; docs/light.md "Cast shadows"). The observed shadow mask: a point is
+  // observed dark below mask_dark_ratio x its group's lit level, the group's lit_quantile
+  // intensity (same chromaticity and normal bin: same albedo, less light). A point observed dark
+  // that a direction predicts lit weighs unexplained_dark_weight in that direction's fit and
+  // total (it may lie in the shadow of an occluder out of view or missing from the depth, which
+  // no direction should gain by explaining with a wrong occluder), and the score is multiplied
+  // by min(1, b / boundary_ref), b the fraction of the predicted shadow boundaries (lattice
+  // neighbours of one group with n.l > mask_min_cos, one predicted lit, one shadowed) where the
+  // lit point is brighter than boundary_ratio x the shadowed one ((seen + 1) / (pairs + 2)).
+  bool image_cues = false;
+  float mask_dark_ratio = 0.5f;
+  float lit_quantile = 0.8f;
+  float mask_min_cos = 0.2f;
+  float unexplained_dark_weight = 0.25f;  // [0, 1]
+  float boundary_ratio = 1.5f;            // > 1
+  float boundary_ref = 0.3f;              // (0, 1]; larger = stricter
   // With an initial direction (the SH estimate): the result is the direction closest to it, on
   // the arc towards the best shadow direction, whose score is >= keep_ratio x the best score
   // (0 = the best shadow direction itself).
   float keep_ratio = 0.9f;
   int threads = 2;  // directions are scored in parallel (results do not depend on it)
+};
+
+// Predicted vs observed shadow mask under one direction (ShadowMaskAgreement).
+struct MaskAgreement {
+  float precision = 0;  // of the points predicted shadowed, the fraction observed dark
+  float recall = 0;     // of the points observed dark, the fraction predicted shadowed
+  int predicted = 0;    // points predicted shadowed (front-facing, visibility known)
+  int observed = 0;     // points observed dark
+  // Predicted shadow boundaries (lattice neighbours of one group, one predicted lit, one
+  // shadowed) and the fraction of them where the lit one is observed brighter by boundary_ratio.
+  int boundaries = 0;
+  float boundary_precision = 0;
 };
 
 struct ShadowEstimate {
@@ -85,7 +114,8 @@ struct ShadowEstimate {
 // coarse-to-fine pattern search around the best options.candidates. Score of l (per group g of
 // points with equal chromaticity and normal bin, p = V_l(x) max(0, n(x).l), V_l the screen-space
 // visibility): the model I = a_g + b_g p with b_g > 0 fitted by least squares in every group;
-// score = sum of the groups' explained sums of squares / sum of their total sums of squares.
+// score = sum of the groups' explained sums of squares / sum of their total sums of squares;
+// with options.image_cues weighted and scaled by the observed shadow mask (ShadowOptions).
 // `intensity`: linear grey (width * height); `colour` optional sRGB bytes (3 per pixel). Throws
 // LightError for mismatched sizes, non-finite intrinsics or invalid options.
 ShadowEstimate EstimateShadowDirection(const GeometryView& g, std::span<const float> intensity,
@@ -98,6 +128,17 @@ ShadowEstimate EstimateShadowDirection(const GeometryView& g, std::span<const fl
 float ShadowScore(const GeometryView& g, std::span<const float> intensity,
                   const ShadowOptions& options, std::span<const uint8_t> colour,
                   const Vec3f& direction, bool shadows = true);
+
+// The image cue for one direction (points at options.stride), a diagnostic: the points with
+// n.l > options.mask_min_cos whose visibility is known, split by the predicted shadow mask
+// (screen-space shadow rays) and by the observed one (ShadowOptions' image cues), and the
+// predicted shadow boundaries seen in the image. Throws as EstimateShadowDirection.
+MaskAgreement ShadowMaskAgreement(const GeometryView& g, std::span<const float> intensity,
+                                  const ShadowOptions& options, std::span<const uint8_t> colour,
+                                  const Vec3f& direction);
+
+// ShadowOptions for raw sensor depth (the node's depth mode): `base` with the image cues on.
+ShadowOptions RawDepthShadowOptions(ShadowOptions base = {});
 
 // Moves the light to the shadow direction: the SH coefficients are rotated by the rotation that
 // takes light->dominant_direction to `direction` (the light keeps its shape and power), and the
