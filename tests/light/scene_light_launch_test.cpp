@@ -164,6 +164,10 @@ TEST(SceneLightLaunch, BadModeIsAOneLineError) {
   EXPECT_EQ(log2,
             "[error] [scene_light] scene_light: gbuffer_normals must be fusion or depth, got "
             "'volume'\n");
+  const auto [status3, log3] = RunSceneLight("-p shadow_depth:=tsdf");
+  EXPECT_TRUE(WIFEXITED(status3) && WEXITSTATUS(status3) == 2);
+  EXPECT_EQ(log3,
+            "[error] [scene_light] scene_light: shadow_depth must be raw or gbuffer, got 'tsdf'\n");
 }
 
 std::string ReadFile(const std::string& path) {
@@ -255,6 +259,10 @@ TEST(SceneLightLaunch, FusionAuxiliaryViewsReachSceneLight) {
     EXPECT_GT(a.with_depth, 1000u) << "the views see the fused courtyard";
   }
   EXPECT_NE(log.find("auxiliary views: used for 3 frames, missing for 0, malformed for 0"),
+            std::string::npos)
+      << log;
+  // shadow_depth raw (default): every G_r found the camera/depth image of its stamp.
+  EXPECT_NE(log.find("shadow search on the frame's depth image for 3 frames, on G_r for 0"),
             std::string::npos)
       << log;
 }

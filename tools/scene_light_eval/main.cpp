@@ -67,6 +67,8 @@
 // --edge-threshold, --edge-radius, --edge-view: light::DepthNormalOptions); --reliability uses
 // the normals' reliability as the estimator's row weights. A noise-free-depth run: a scenario
 // without its `sensor:` block (the "sensor" path then sees millimetre depth16 without noise).
+// --fused-shadows raw|gr: the fused input's shadow search on the frame's own depth image with
+// the raw-depth options (raw, the node's shadow_depth default) or on G_r.
 // Cast shadows (round 4, on by default for the full variant, --fast-shadows for OursFast too;
 // --no-shadows: off) refine the distant light's direction
 // (light::RefineLightWithShadows; EstimateSceneLight's when the distant model is chosen, timed
@@ -135,6 +137,7 @@ struct Options {
   int aux_resolution = 128;       // --aux-resolution N: traced views' pixels per side
   bool camera_truth = false;      // --camera-truth: score against the light at the camera
   bool grey_world = false;        // --grey-world: one uniform albedo (no chromaticity groups)
+  bool fused_shadows_raw = true;  // --fused-shadows raw|gr (raw, as the node): the search's depth
   bool invariant_albedo = false;  // --invariant-albedo: EstimateOptions::albedo_invariant
   int albedo_groups = -1;         // --albedo-groups N: EstimateOptions::albedo_groups (and point's)
   bool quadrature = false;        // --quadrature: eq. 6 as printed (no analytic unoccluded part)
@@ -370,7 +373,10 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
                 light::TemporalLightEstimator* temporal = nullptr, const float* rotation = nullptr,
                 const std::vector<std::array<float, 3>>* true_lamps = nullptr,
                 std::span<const float> reliability = {},
-                light::PointLightTracker* tracker = nullptr) {
+                light::PointLightTracker* tracker = nullptr,
+                const light::GeometryView* shadow_geometry = nullptr) {
+  // The shadow search's geometry: `g` unless given (--fused-shadows raw: the frame's own depth).
+  const light::GeometryView& sg = shadow_geometry != nullptr ? *shadow_geometry : g;
   Sample s;
   s.time_s = time_s;
   light::TransferResult& t = v.result;
@@ -388,7 +394,7 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     e = light::EstimateLight(t, grey, v.estimate, colour, reliability);
     if (v.scene.shadow.enabled && e.valid) {
       const double c_shadow = CpuMs();
-      shadow = light::RefineLightWithShadows(g, grey, v.scene.shadow, colour, &e);
+      shadow = light::RefineLightWithShadows(sg, grey, v.scene.shadow, colour, &e);
       s.cpu_ms_shadow = CpuMs() - c_shadow;
     }
   } else {
@@ -406,7 +412,7 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     e = r.light;
     if (v.scene.shadow.enabled && r.used == light::LightModel::kDistant && e.valid) {
       const double c_shadow = CpuMs();
-      shadow = light::RefineLightWithShadows(g, grey, v.scene.shadow, colour, &e);
+      shadow = light::RefineLightWithShadows(sg, grey, v.scene.shadow, colour, &e);
       s.cpu_ms_shadow = CpuMs() - c_shadow;
     }
     s.point_chosen = r.used == light::LightModel::kPoint;
@@ -687,7 +693,11 @@ int Run(int argc, char** argv) {
       o.camera_truth = true;
     else if (a == "--grey-world")
       o.grey_world = true;
-    else if (a == "--invariant-albedo")
+    else if (a == "--fused-shadows") {
+      const std::string m = value();
+      if (m != "raw" && m != "gr") throw node::UsageError("--fused-shadows must be raw or gr");
+      o.fused_shadows_raw = m == "raw";
+    } else if (a == "--invariant-albedo")
       o.invariant_albedo = true;
     else if (a == "--albedo-groups")
       o.albedo_groups = static_cast<int>(node::ParseNumberOption(a, value()));
@@ -1223,10 +1233,19 @@ int Run(int argc, char** argv) {
           recon::WriteAuxiliaryViews(last_fusion.camera_to_world, views, *m, m.payload);
           fused_aux = light::AuxiliaryFromMessage(*m, m.payload);
         }
+        // --fused-shadows raw: the shadow search on the frame's own depth (aligned with the image,
+        // with the raw-depth options) while the transfer and the fit use G_r.
+        std::optional<light::GeometryStorage> raw;
+        if (o.fused_shadows_raw) raw = light::GeometryFromSimFrame(f, true, dgo);
+        const light::GeometryView raw_view = raw ? raw->View() : light::GeometryView{};
         for (Variant* v : {&full, &fast}) {
+          const light::ShadowOptions shadow = v->scene.shadow;
+          if (raw) v->scene.shadow = v->shadow_depth;
           v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, fused_aux, truth,
                                               f.time_s, &camera_truth, temporal_of(v, 2), rot,
-                                              nullptr, g.reliability, tracker_of(v, 2)));
+                                              nullptr, g.reliability, tracker_of(v, 2),
+                                              raw ? &raw_view : nullptr));
+          v->scene.shadow = shadow;
         }
       }
       std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg; sensor %.1f / %.1f",
