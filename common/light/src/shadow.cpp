@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "parallel.h"
+#include "shadow_kernel.h"
 
 namespace probeless::light {
 namespace {
@@ -151,32 +152,30 @@ class Scorer {
   // unknown (with unknown_behind: the ray passed behind a surface by more than its thickness
   // and hit nothing).
   float Visible(const Point& p, const Vec3f& l) const {
-    bool hidden = false;
-    // u(t) = (au + t bu) / (p.z + t l_z): the projection of p + t l (pixel centres at integers).
-    const float fx = static_cast<float>(g_.intrinsics.fx),
-                fy = static_cast<float>(g_.intrinsics.fy);
-    const float cx = static_cast<float>(g_.intrinsics.cx),
-                cy = static_cast<float>(g_.intrinsics.cy);
-    const float au = fx * p.x + cx * p.z + 0.5f, bu = fx * l[0] + cx * l[2];
-    const float av = fy * p.y + cy * p.z + 0.5f, bv = fy * l[1] + cy * l[2];
-    const float* depth = g_.depth.data();
-    const int w = g_.width, h = g_.height;
-    const float bias0 = o_.depth_bias_m, bias_rel = o_.depth_bias_rel;
-    const int n = static_cast<int>(steps_.size());
-    for (int k = 0; k < n; ++k) {
-      const float t = steps_[k];
-      const float sz = p.z + t * l[2];
-      if (sz < 0.05f) break;
-      const float inv = 1.0f / sz;
-      const float u = (au + t * bu) * inv, v = (av + t * bv) * inv;  // + 0.5: rounding by floor
-      if (!(u >= 0 && v >= 0 && u < w && v < h)) break;
-      const float d = depth[static_cast<int>(v) * w + static_cast<int>(u)];
-      if (d > 0 && sz - d > bias0 + bias_rel * sz) {
-        if (sz - d < thick_[k]) return 0;
-        hidden = true;
-      }
+    return internal::ShadowRayScalar(Ray(), p.x, p.y, p.z, l);
+  }
+
+  // Visible() of every point facing l (n.l > 0), 8 points per kernel call; the others get 1.
+  void VisibleFacing(const PointSet& s, const Vec3f& l, std::vector<float>* vis) const {
+    const size_t n = s.points.size();
+    vis->assign(n, 1.0f);
+    std::vector<int> facing;
+    facing.reserve(n);
+    for (size_t j = 0; j < n; ++j) {
+      const Point& p = s.points[j];
+      if (p.nx * l[0] + p.ny * l[1] + p.nz * l[2] > 0) facing.push_back(static_cast<int>(j));
     }
-    return hidden && o_.unknown_behind ? -1.0f : 1.0f;
+    const internal::ShadowRayParams ray = Ray();
+    for (size_t i = 0; i < facing.size(); i += 8) {
+      float x[8] = {}, y[8] = {}, z[8] = {}, out[8];
+      const size_t m = std::min<size_t>(8, facing.size() - i);
+      for (size_t k = 0; k < m; ++k) {
+        const Point& p = s.points[facing[i + k]];
+        x[k] = p.x, y[k] = p.y, z[k] = p.z;
+      }
+      internal::ShadowRay8(ray, x, y, z, l, out);
+      for (size_t k = 0; k < m; ++k) (*vis)[facing[i + k]] = out[k];
+    }
   }
 
   // The explained fraction of the within-group variance (shadow.h), with or without shadows.
@@ -194,11 +193,13 @@ class Scorer {
     std::vector<double> tn(s.count.begin(), s.count.end());
     std::vector<float> vis;  // per point: V for the boundaries, -1 = not counted
     if (cues) vis.assign(s.points.size(), -1.0f);
+    std::vector<float> visible;  // V of the points facing l
+    if (shadows) VisibleFacing(s, l, &visible);
     for (size_t j = 0; j < s.points.size(); ++j) {
       const Point& p = s.points[j];
       const float c = p.nx * l[0] + p.ny * l[1] + p.nz * l[2];
       if (c <= 0) continue;  // p = 0: adds nothing to the sums below
-      const float v = shadows ? Visible(p, l) : 1.0f;
+      const float v = shadows ? visible[j] : 1.0f;
       if (cues && c > o_.mask_min_cos) vis[j] = v;
       const double in = p.intensity;
       if (v < 0) {  // unknown: out of this direction's fit
@@ -317,6 +318,18 @@ class Scorer {
   }
 
  private:
+  internal::ShadowRayParams Ray() const {
+    internal::ShadowRayParams r;
+    r.depth = g_.depth.data();
+    r.width = g_.width, r.height = g_.height;
+    r.fx = static_cast<float>(g_.intrinsics.fx), r.fy = static_cast<float>(g_.intrinsics.fy);
+    r.cx = static_cast<float>(g_.intrinsics.cx), r.cy = static_cast<float>(g_.intrinsics.cy);
+    r.steps = steps_.data(), r.thickness = thick_.data();
+    r.step_count = static_cast<int>(steps_.size());
+    r.bias = o_.depth_bias_m, r.bias_rel = o_.depth_bias_rel;
+    r.unknown_behind = o_.unknown_behind;
+    return r;
+  }
   const GeometryView& g_;
   const ShadowOptions& o_;
   std::vector<float> steps_, thick_;
@@ -425,37 +438,48 @@ ShadowEstimate EstimateShadowDirection(const GeometryView& g, std::span<const fl
   if (fine.groups == 0) return out;
   float best_score = -1, runner_up = -1;
   Vec3f best{0, 0, 1};
-  std::vector<std::pair<Vec3f, float>> refined;
-  for (const Vec3f& seed : seeds) {
-    Vec3f d = seed;
-    float s = ScoreAll(scorer, fine, {d}, 1)[0];
-    ++out.evaluations;
-    double step = o.refine_start_deg * std::numbers::pi / 180;
-    for (int level = 0; level < o.refine_levels; ++level, step *= 0.5) {
-      // Tangent basis at d.
-      const Vec3f a = std::abs(d[0]) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
-      Vec3f e1 = Normalised(a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2],
-                            a[0] * d[1] - a[1] * d[0]);
-      Vec3f e2 = Normalised(d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
-                            d[0] * e1[1] - d[1] * e1[0]);
-      std::vector<Vec3f> ring;
-      for (int i = -1; i <= 1; ++i) {
-        for (int j = -1; j <= 1; ++j) {
-          if (i == 0 && j == 0) continue;
-          if (i != 0 && j != 0) continue;  // compass search: 4 neighbours
-          const double ti = std::tan(i * step), tj = std::tan(j * step);
-          ring.push_back(Normalised(d[0] + ti * e1[0] + tj * e2[0], d[1] + ti * e1[1] + tj * e2[1],
-                                    d[2] + ti * e1[2] + tj * e2[2]));
+  // Each seed is refined by one thread when there are enough seeds (no synchronisation per
+  // level); otherwise each level's ring is scored in parallel. Same scores either way.
+  const int seed_threads = std::min<int>(o.threads, static_cast<int>(seeds.size()));
+  const int ring_threads = seed_threads > 1 ? 1 : o.threads;
+  std::vector<std::pair<Vec3f, float>> refined(seeds.size());
+  std::vector<int> evaluations(seeds.size(), 0);
+  internal::ParallelRows(seed_threads, static_cast<int>(seeds.size()), 1, [&](int b, int e) {
+    for (int k = b; k < e; ++k) {
+      Vec3f d = seeds[k];
+      float s = scorer.Score(fine, d, true);
+      ++evaluations[k];
+      double step = o.refine_start_deg * std::numbers::pi / 180;
+      for (int level = 0; level < o.refine_levels; ++level, step *= 0.5) {
+        // Tangent basis at d.
+        const Vec3f a = std::abs(d[0]) < 0.9f ? Vec3f{1, 0, 0} : Vec3f{0, 1, 0};
+        Vec3f e1 = Normalised(a[1] * d[2] - a[2] * d[1], a[2] * d[0] - a[0] * d[2],
+                              a[0] * d[1] - a[1] * d[0]);
+        Vec3f e2 = Normalised(d[1] * e1[2] - d[2] * e1[1], d[2] * e1[0] - d[0] * e1[2],
+                              d[0] * e1[1] - d[1] * e1[0]);
+        std::vector<Vec3f> ring;
+        for (int i = -1; i <= 1; ++i) {
+          for (int j = -1; j <= 1; ++j) {
+            if (i == 0 && j == 0) continue;
+            if (i != 0 && j != 0) continue;  // compass search: 4 neighbours
+            const double ti = std::tan(i * step), tj = std::tan(j * step);
+            ring.push_back(Normalised(d[0] + ti * e1[0] + tj * e2[0],
+                                      d[1] + ti * e1[1] + tj * e2[1],
+                                      d[2] + ti * e1[2] + tj * e2[2]));
+          }
+        }
+        const std::vector<float> rs = ScoreAll(scorer, fine, ring, ring_threads);
+        evaluations[k] += static_cast<int>(ring.size());
+        for (size_t j = 0; j < ring.size(); ++j) {
+          if (rs[j] > s) s = rs[j], d = ring[j];
         }
       }
-      const std::vector<float> rs = ScoreAll(scorer, fine, ring, o.threads);
-      out.evaluations += static_cast<int>(ring.size());
-      for (size_t j = 0; j < ring.size(); ++j) {
-        if (rs[j] > s) s = rs[j], d = ring[j];
-      }
+      refined[k] = {d, s};
     }
-    refined.push_back({d, s});
-    if (s > best_score) best_score = s, best = d;
+  });
+  for (size_t k = 0; k < seeds.size(); ++k) {
+    out.evaluations += evaluations[k];
+    if (refined[k].second > best_score) best_score = refined[k].second, best = refined[k].first;
   }
   // Runner-up: the best refined candidate that did not converge to the best direction.
   for (const auto& [d, s] : refined) {

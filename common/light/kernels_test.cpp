@@ -1,13 +1,13 @@
-// The transfer's occlusion kernel: the AVX2 version (8 directions per step) against the scalar
-// reference, on random pixels of a random depth image (fixed seed), every direction count the
-// transfer allows rounded to the padding.
-#include "occlusion_kernel.h"
-
+// The private SIMD kernels against their scalar references on random inputs (fixed seeds): the
+// transfer's occlusion test (8 directions per step) and the shadow search's ray (8 points).
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 #include <vector>
+
+#include "occlusion_kernel.h"
+#include "shadow_kernel.h"
 
 namespace probeless::light::internal {
 namespace {
@@ -69,6 +69,66 @@ TEST(OcclusionKernel, SimdMatchesScalar) {
     EXPECT_GT(compared, 400 * n_dir * 99 / 100) << "threshold disagreements above 1 %";
     EXPECT_GT(occluded, compared / 20) << "too few occluded samples to test the kernel";
   }
+}
+
+// The shadow ray: a bumpy depth image with holes and a box standing in front of it, random points
+// on the surface and random directions; every outcome (lit, occluded, unknown) must occur.
+TEST(ShadowRayKernel, EightPointsMatchTheScalarRay) {
+  constexpr int kW = 120, kH = 90;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  std::vector<float> depth(kW * kH);
+  for (int v = 0; v < kH; ++v) {
+    for (int u = 0; u < kW; ++u) {
+      float z = 3.0f + 0.3f * std::sin(0.1f * u) + 0.02f * uni(rng);
+      if (u > 40 && u < 70 && v > 30 && v < 60) z = 2.0f;  // a box 1 m in front
+      depth[v * kW + u] = uni(rng) < 0.03f ? 0.0f : z;
+    }
+  }
+  std::vector<float> steps, thickness;
+  for (float t = 0.04f; t < 3.0f; t *= 1.15f) {
+    steps.push_back(t);
+    thickness.push_back(std::max(0.4f, 1.5f * 0.15f * t));
+  }
+  ShadowRayParams r;
+  r.depth = depth.data();
+  r.width = kW, r.height = kH;
+  r.fx = r.fy = 100, r.cx = 59.5f, r.cy = 44.5f;
+  r.steps = steps.data(), r.thickness = thickness.data();
+  r.step_count = static_cast<int>(steps.size());
+  r.bias = 0.005f, r.bias_rel = 0.002f;
+  int outcome[3] = {0, 0, 0}, compared = 0, differ = 0;
+  for (bool unknown_behind : {true, false}) {
+    r.unknown_behind = unknown_behind;
+    for (int trial = 0; trial < 300; ++trial) {
+      const float a = 6.2831853f * uni(rng), zc = -0.2f - 0.8f * uni(rng);
+      const float s = std::sqrt(1 - zc * zc);
+      const std::array<float, 3> l = {s * std::cos(a), s * std::sin(a), zc};  // towards the camera
+      float x[8], y[8], z[8], out[8];
+      for (int k = 0; k < 8; ++k) {
+        const int u = static_cast<int>(uni(rng) * kW) % kW,
+                  v = static_cast<int>(uni(rng) * kH) % kH;
+        z[k] = depth[v * kW + u] > 0 ? depth[v * kW + u] : 3.0f;
+        x[k] = (u - r.cx) * z[k] / r.fx, y[k] = (v - r.cy) * z[k] / r.fy;
+      }
+      if (trial % 10 == 0) z[7] = 0;  // padding lanes: lit
+      ShadowRay8(r, x, y, z, l, out);
+      for (int k = 0; k < 8; ++k) {
+        const float ref = z[k] > 0 ? ShadowRayScalar(r, x[k], y[k], z[k], l) : 1.0f;
+        ++compared;
+        // A sample within rounding of a pixel border or the bias may go either way: rare.
+        if (out[k] != ref) {
+          ++differ;
+          continue;
+        }
+        ++outcome[static_cast<int>(ref) + 1];
+      }
+    }
+  }
+  EXPECT_LT(differ, compared / 100) << differ << " of " << compared << " rays differ";
+  EXPECT_GT(outcome[0], 20) << "unknown";
+  EXPECT_GT(outcome[1], 100) << "occluded";
+  EXPECT_GT(outcome[2], 100) << "lit";
 }
 
 }  // namespace
