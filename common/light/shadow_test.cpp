@@ -365,6 +365,11 @@ TEST(Shadow, OneLineErrors) {
   EXPECT_EQ(
       probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad_cue); }),
       "light::EstimateShadowDirection: unexplained_dark_weight must be in [0, 1]");
+  ShadowOptions bad_keep;
+  bad_keep.cue_keep_ratio = 1.2f;
+  EXPECT_EQ(
+      probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad_keep); }),
+      "light::EstimateShadowDirection: keep_ratio and cue_keep_ratio must be in [0, 1]");
   GeometryView nan_k = s.View();
   nan_k.intrinsics.fx = NAN;
   EXPECT_EQ(

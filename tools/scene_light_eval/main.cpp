@@ -191,7 +191,8 @@ struct Options {
   // --no-shadows: off). Tuning: --shadow-stride, --shadow-coarse-stride, --shadow-directions,
   // --shadow-candidates, --shadow-steps, --shadow-bias, --shadow-bias-rel, --shadow-thickness,
   // --shadow-thickness-steps, --shadow-behind-lit, --shadow-chroma, --shadow-min-score,
-  // --shadow-min-gain, --shadow-min-contrast, --shadow-max-runner-up, --shadow-keep.
+  // --shadow-min-gain, --shadow-min-contrast, --shadow-max-runner-up, --shadow-keep,
+  // --shadow-cue-keep (ShadowOptions::cue_keep_ratio).
   bool shadows = light::ShadowOptions{}.enabled;
   bool fast_shadows = false;  // --fast-shadows: the shadow search for OursFast too
   light::ShadowOptions shadow;
@@ -757,6 +758,8 @@ int Run(int argc, char** argv) {
       o.shadow.min_gain = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-keep")
       o.shadow.keep_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
+    else if (a == "--shadow-cue-keep")
+      o.shadow.cue_keep_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-min-contrast")
       o.shadow.min_contrast = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-behind-lit")

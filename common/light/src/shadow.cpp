@@ -393,6 +393,8 @@ void Check(const GeometryView& g, std::span<const float> intensity, std::span<co
        "unexplained_dark_weight must be in [0, 1]"},
       {o.boundary_ratio > 1 && o.boundary_ref > 0 && o.boundary_ref <= 1,
        "boundary_ratio must be > 1 and boundary_ref in (0, 1]"},
+      {o.keep_ratio >= 0 && o.keep_ratio <= 1 && o.cue_keep_ratio >= 0 && o.cue_keep_ratio <= 1,
+       "keep_ratio and cue_keep_ratio must be in [0, 1]"},
   };
   for (const auto& [ok, message] : rules) {
     if (!ok) throw LightError(f + message);
@@ -495,13 +497,14 @@ ShadowEstimate EstimateShadowDirection(const GeometryView& g, std::span<const fl
   // The direction closest to `initial` on the arc towards `best` that explains the shadows
   // nearly as well (score >= keep_ratio x best): the shadows correct the initial direction only
   // as far as they contradict it.
-  if (out.valid && initial != nullptr && Dot(*initial, *initial) > 0.5f && o.keep_ratio > 0) {
+  const float keep_ratio = o.image_cues ? o.cue_keep_ratio : o.keep_ratio;
+  if (out.valid && initial != nullptr && Dot(*initial, *initial) > 0.5f && keep_ratio > 0) {
     const Vec3f from = Normalised((*initial)[0], (*initial)[1], (*initial)[2]);
     auto along = [&](double f) {  // slerp-like: normalised linear blend (angles < 180 deg)
       return Normalised(from[0] + f * (best[0] - from[0]), from[1] + f * (best[1] - from[1]),
                         from[2] + f * (best[2] - from[2]));
     };
-    const float need = o.keep_ratio * best_score;
+    const float need = keep_ratio * best_score;
     if (Dot(from, best) > -0.9f) {
       if (scorer.Score(fine, from, true) >= need) {
         out.direction = from;
