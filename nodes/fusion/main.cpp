@@ -215,9 +215,12 @@ int Run(int argc, char** argv) {
       return;
     }
     // A depth still waiting for its image is processed without colour now.
+    // Taken out of pending_depth before processing: a frame whose processing throws (a one-line
+    // error from `guarded`) is not processed a second time with the next depth.
     if (pending_depth) {
-      process(*pending_depth, nullptr);
+      PendingDepth waiting = std::move(*pending_depth);
       pending_depth.reset();
+      process(waiting, nullptr);
     }
     PendingDepth d;
     d.stamp_ns = m->header.stamp_ns;
@@ -240,8 +243,9 @@ int Run(int argc, char** argv) {
     img.payload.assign(m.payload.begin(), m.payload.begin() + m->PayloadBytes());
     last_image = std::move(img);
     if (pending_depth && pending_depth->stamp_ns == last_image->stamp_ns) {
-      process(*pending_depth, &*last_image);
+      PendingDepth waiting = std::move(*pending_depth);
       pending_depth.reset();
+      process(waiting, &*last_image);
     }
   };
   auto guarded = [&](auto fn) {

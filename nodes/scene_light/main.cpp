@@ -53,6 +53,7 @@
 #include <algorithm>
 #include <chrono>
 #include <deque>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -185,8 +186,11 @@ int Run(int argc, char** argv) {
                                     : node.CreateSubscriber<msgs::Image>("camera/depth");
   // raw_shadows: the latest depth images (copies of the messages), matched to a G_r by stamp.
   std::optional<bus::Subscriber> raw_depth_sub;
-  if (raw_shadows) raw_depth_sub.emplace(node.CreateSubscriber<msgs::Image>("camera/depth"));
-  constexpr size_t kRawDepthKept = 4;
+  if (raw_shadows) {
+    raw_depth_sub.emplace(node.CreateSubscriber<msgs::Image>("camera/depth", {.queue_depth = 8}));
+  }
+  constexpr size_t kRawDepthKept =
+      8;              // copies not yet matched (older than a processed G_r: dropped)
   struct HeldDepth {  // a copy of a camera/depth message, 64-byte aligned as msgs::ReadMessage
                       // needs
     int64_t stamp_ns = 0;
@@ -196,7 +200,7 @@ int Run(int argc, char** argv) {
   };
   std::deque<HeldDepth> raw_depths;  // oldest first
   std::vector<float> raw_depth_m, raw_normals;
-  int64_t raw_used = 0, raw_missing = 0;
+  int64_t raw_used = 0, raw_missing = 0, raw_size_mismatch = 0;
   auto hold_depth = [&](bus::Sample&& s) {
     const auto d = msgs::ReadMessage<msgs::Image>(s.data());
     const auto bytes = s.data();
@@ -217,7 +221,12 @@ int Run(int argc, char** argv) {
     aux_sub.emplace(node.CreateSubscriber<msgs::AuxiliaryViews>("scene/aux", {.queue_depth = 8}));
   }
   std::deque<bus::Sample> aux_queue;  // received views not yet matched, oldest first
+  constexpr size_t kAuxKept = 8;      // held samples (the bus allows 16 per process)
   int64_t aux_used = 0, aux_missing = 0, aux_bad = 0;
+  auto hold_aux = [&](bus::Sample&& s) {
+    aux_queue.push_back(std::move(s));
+    if (aux_queue.size() > kAuxKept) aux_queue.pop_front();
+  };
   // The views with `stamp`: drops older ones, waits up to aux_wait_ms while none as new arrived.
   auto take_aux = [&](int64_t stamp) -> std::optional<bus::Sample> {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(aux_wait_ms);
@@ -226,7 +235,7 @@ int Run(int argc, char** argv) {
       // input of the node; the G_r that follows them is acknowledged by Spin after its frame.
       while (auto s = aux_sub->TryTake()) {
         node.Ack(*aux_sub, s->info());
-        aux_queue.push_back(std::move(*s));
+        hold_aux(std::move(*s));
       }
       while (!aux_queue.empty()) {
         bus::Sample front = std::move(aux_queue.front());
@@ -244,7 +253,7 @@ int Run(int argc, char** argv) {
       if (now >= deadline) return std::nullopt;
       if (auto s = aux_sub->Take(deadline - now)) {
         node.Ack(*aux_sub, s->info());
-        aux_queue.push_back(std::move(*s));
+        hold_aux(std::move(*s));
       }
     }
   };
@@ -259,6 +268,7 @@ int Run(int argc, char** argv) {
   std::vector<uint8_t> rgb;  // the image's sRGB bytes for the albedo groups
   light::TransferResult result;
   int64_t frames = 0, published = 0;
+  int64_t last_stamp = std::numeric_limits<int64_t>::min();  // the last processed frame's
   bool warned = false;
 
   auto process = [&](bus::Sample&& sample) {
@@ -323,6 +333,12 @@ int Run(int argc, char** argv) {
     }
     light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
     const bool indirect = publish_indirect && dominant.has_value();
+    // Stamps going backwards (a restarted source): what is held for the old stream never matches.
+    if (header.stamp_ns < last_stamp) {
+      aux_queue.clear();
+      raw_depths.clear();
+    }
+    last_stamp = header.stamp_ns;
     std::optional<bus::Sample> aux_sample;
     light::AuxiliaryBuffers aux;  // borrows aux_sample's payload
     if (aux_sub) {
@@ -378,11 +394,19 @@ int Run(int argc, char** argv) {
         ++raw_missing;
       }
       if (shadow_view.width != view.width || shadow_view.height != view.height) {
-        throw light::LightError("scene_light: camera/depth is " +
-                                std::to_string(shadow_view.width) + "x" +
-                                std::to_string(shadow_view.height) + ", the G_r " +
-                                std::to_string(view.width) + "x" + std::to_string(view.height));
+        if (raw_size_mismatch == 0) {
+          node.Warn() << "camera/depth is " << shadow_view.width << "x" << shadow_view.height
+                      << ", the G_r " << view.width << "x" << view.height
+                      << ": the shadow search uses G_r for such frames";
+        }
+        ++raw_size_mismatch;
+        --raw_used;
+        ++raw_missing;
+        shadow_view = view;
+        shadow_options = &so.shadow;
       }
+      // Depth images up to this G_r's stamp can match no later G_r.
+      std::erase_if(raw_depths, [&](const HeldDepth& d) { return d.stamp_ns <= header.stamp_ns; });
     }
     light::LightEstimate e;
     if (tmo.frames > 1) {
@@ -468,6 +492,9 @@ int Run(int argc, char** argv) {
       {&image_sub, [&](bus::Sample&& s) { image.emplace(std::move(s)); }},
       {&trigger_sub, process}};
   if (raw_depth_sub) handlers.push_back({&*raw_depth_sub, hold_depth});
+  // Views that arrive while no G_r is being processed (e.g. before camera_info) are taken and
+  // acked by Spin too, so lock-step replay never waits on an unacked view.
+  if (aux_sub) handlers.push_back({&*aux_sub, hold_aux});
   node.Spin(handlers);
   node.Info() << "published " << published << " lights for " << frames << " frames";
   if (raw_shadows) {

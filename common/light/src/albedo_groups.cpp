@@ -50,6 +50,10 @@ std::vector<int> AlbedoGroupIds(std::span<const float> rgb, int cells, bool inva
     }
     return id;
   }
+  if (m == 0) {
+    *count = 1;
+    return id;
+  }
   // Log chromaticity; a floor keeps black channels finite.
   constexpr float kFloor = 1e-3f;
   std::vector<float> x(m), y(m);

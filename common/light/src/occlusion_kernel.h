@@ -11,7 +11,9 @@ namespace probeless::light::internal {
 
 // Everything the kernel needs besides the pixel: the depth image (metres, 0 = none), pinhole
 // intrinsics, the SSDO radius and range check, the depth bias, chi of eq. 8, and the directions as
-// structure-of-arrays padded with zeros to `n_padded` (a multiple of 8 >= n_directions).
+// structure-of-arrays padded with zeros to `n_padded` (a multiple of 8 >= n_directions; the
+// kernels run over all n_padded, the zero padding gives cosn = 0, k = 1). width * height < 2^31
+// (pixel indices are int32 for the gathers).
 struct OcclusionParams {
   const float* depth = nullptr;
   int width = 0;
@@ -47,6 +49,7 @@ void OcclusionScalar(const OcclusionParams& p, const float* offsets, const float
 // without AVX2 (OcclusionSimdAvailable() == false).
 void OcclusionSimd(const OcclusionParams& p, const float* offsets, const float x[3],
                    const float n[3], PixelOcclusion* out);
+// True when the library was built with AVX2 and FMA (then OcclusionSimd is the SIMD version).
 bool OcclusionSimdAvailable();
 
 }  // namespace probeless::light::internal

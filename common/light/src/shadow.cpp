@@ -151,11 +151,8 @@ class Scorer {
   // 1 if the point sees the light along l (screen-space shadow ray), 0 if occluded, -1 if
   // unknown (with unknown_behind: the ray passed behind a surface by more than its thickness
   // and hit nothing).
-  float Visible(const Point& p, const Vec3f& l) const {
-    return internal::ShadowRayScalar(Ray(), p.x, p.y, p.z, l);
-  }
-
-  // Visible() of every point facing l (n.l > 0), 8 points per kernel call; the others get 1.
+  // The shadow ray (internal::ShadowRay8: 1 lit, 0 occluded, -1 unknown) of every point facing l
+  // (n.l > 0), 8 points per kernel call; the others get 1. Score, Mask and Contrast all use it.
   void VisibleFacing(const PointSet& s, const Vec3f& l, std::vector<float>* vis) const {
     const size_t n = s.points.size();
     vis->assign(n, 1.0f);
@@ -266,12 +263,13 @@ class Scorer {
   // Predicted vs observed shadow mask under l (shadow.h, MaskAgreement), over the points with
   // n.l > mask_min_cos whose visibility is known.
   MaskAgreement Mask(const PointSet& s, const Vec3f& l) const {
-    std::vector<float> vis(s.points.size(), -1.0f);
+    std::vector<float> vis(s.points.size(), -1.0f), visible;
+    VisibleFacing(s, l, &visible);  // as Score computes it (mask_min_cos >= 0: facing points)
     int predicted = 0, observed = 0, both = 0;
     for (size_t j = 0; j < s.points.size(); ++j) {
       const Point& p = s.points[j];
       if (p.nx * l[0] + p.ny * l[1] + p.nz * l[2] <= o_.mask_min_cos) continue;
-      vis[j] = Visible(p, l);
+      vis[j] = visible[j];
       if (vis[j] < 0) continue;
       predicted += vis[j] == 0 ? 1 : 0;
       observed += p.dark ? 1 : 0;
@@ -294,10 +292,13 @@ class Scorer {
   float Contrast(const PointSet& s, const Vec3f& l) const {
     std::vector<double> lit(s.groups, 0), dark(s.groups, 0);
     std::vector<int> n_lit(s.groups, 0), n_dark(s.groups, 0);
-    for (const Point& p : s.points) {
+    std::vector<float> visible;
+    VisibleFacing(s, l, &visible);  // as Score computes it
+    for (size_t j = 0; j < s.points.size(); ++j) {
+      const Point& p = s.points[j];
       const float c = p.nx * l[0] + p.ny * l[1] + p.nz * l[2];
       if (c <= 0.1f) continue;
-      const float v = Visible(p, l);
+      const float v = visible[j];
       if (v < 0) continue;
       if (v > 0) {
         lit[p.group] += p.intensity, ++n_lit[p.group];
@@ -395,6 +396,7 @@ void Check(const GeometryView& g, std::span<const float> intensity, std::span<co
        "boundary_ratio must be > 1 and boundary_ref in (0, 1]"},
       {o.keep_ratio >= 0 && o.keep_ratio <= 1 && o.cue_keep_ratio >= 0 && o.cue_keep_ratio <= 1,
        "keep_ratio and cue_keep_ratio must be in [0, 1]"},
+      {o.mask_min_cos >= 0 && o.mask_min_cos < 1, "mask_min_cos must be in [0, 1)"},
   };
   for (const auto& [ok, message] : rules) {
     if (!ok) throw LightError(f + message);

@@ -10,6 +10,7 @@ namespace probeless::light::internal {
 // The depth image (metres, 0 = none) with pinhole intrinsics, the march (ray lengths `steps`,
 // metres, increasing, and the occluder thickness assumed at each), the depth bias and whether a
 // ray that passed behind a surface by more than its thickness without a hit is unknown.
+// width * height < 2^31 (pixel indices are int32 for the gathers).
 struct ShadowRayParams {
   const float* depth = nullptr;
   int width = 0;

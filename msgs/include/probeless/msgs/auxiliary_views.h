@@ -25,6 +25,7 @@ enum class AuxiliaryViewRole : uint32_t {
 constexpr std::string_view DescribeEnum(AuxiliaryViewRole) {
   return "AuxiliaryViewRole{invalid=0,left=1,right=2,top=3,light=4}";
 }
+// The role's lower-case name ("left", "right", "top", "light"; "invalid" otherwise), for messages.
 constexpr std::string_view AuxiliaryViewRoleName(AuxiliaryViewRole role) {
   switch (role) {
     case AuxiliaryViewRole::kLeft:
@@ -73,6 +74,7 @@ struct AuxiliaryView {
     PROBELESS_MSGS_FIELD(b, AuxiliaryView, reserved);
     return b.Finish<AuxiliaryView>();
   }
+  // Bytes of the view's depth plane in the payload: width x height float32 (metres).
   constexpr size_t DepthPlaneBytes() const {
     return static_cast<size_t>(width) * height * sizeof(float);
   }
