@@ -464,14 +464,15 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     s.shadow_contrast = shadow.contrast;
     s.shadow_runner_up = shadow.runner_up;
     if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
+      // On the search's own geometry (sg: the raw depth with --fused-shadows raw).
       s.shadow_truth_score =
-          light::ShadowScore(g, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+          light::ShadowScore(sg, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
       s.shadow_truth_mask =
-          light::ShadowMaskAgreement(g, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+          light::ShadowMaskAgreement(sg, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
     }
     const light::Vec3f& sd = shadow.direction;
     if (sd[0] != 0 || sd[1] != 0 || sd[2] != 0) {
-      s.shadow_mask = light::ShadowMaskAgreement(g, grey, v.scene.shadow, colour, sd);
+      s.shadow_mask = light::ShadowMaskAgreement(sg, grey, v.scene.shadow, colour, sd);
     }
   }
   for (int k = 0; k < 3; ++k) {
