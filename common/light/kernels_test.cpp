@@ -43,7 +43,7 @@ TEST(OcclusionKernel, SimdMatchesScalar) {
     p.fx = p.fy = 80, p.cx = 47.5f, p.cy = 35.5f, p.ifx = p.ify = 1.0f / 80;
     p.radius = 0.4f, p.max_occ2 = 0.6f * 0.6f, p.bias = 0.01f, p.bias_rel = 0.005f;
     p.chi = 0.3f, p.inv_chi = 1 / 0.3f;
-    p.n_directions = n_dir, p.n_padded = n_pad;
+    p.n_padded = n_pad;
     p.dir_x = dx.data(), p.dir_y = dy.data(), p.dir_z = dz.data();
     int occluded = 0, compared = 0;
     for (int i = 0; i < 400; ++i) {

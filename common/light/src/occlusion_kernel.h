@@ -11,7 +11,7 @@ namespace probeless::light::internal {
 
 // Everything the kernel needs besides the pixel: the depth image (metres, 0 = none), pinhole
 // intrinsics, the SSDO radius and range check, the depth bias, chi of eq. 8, and the directions as
-// structure-of-arrays padded with zeros to `n_padded` (a multiple of 8 >= n_directions; the
+// structure-of-arrays padded with zeros to `n_padded` (a multiple of 8 >= the direction count; the
 // kernels run over all n_padded, the zero padding gives cosn = 0, k = 1). width * height < 2^31
 // (pixel indices are int32 for the gathers).
 struct OcclusionParams {
@@ -25,14 +25,13 @@ struct OcclusionParams {
   float bias_rel = 0;
   float chi = 1;  // eq. 8
   float inv_chi = 1;
-  int n_directions = 0;
   int n_padded = 0;
   const float* dir_x = nullptr;  // n_padded each
   const float* dir_y = nullptr;
   const float* dir_z = nullptr;
 };
 
-// Per direction j < n_directions of one pixel: cosn[j] = omega_j . n (eq. 6's cosine); k[j] = the
+// Per direction j < n_padded of one pixel: cosn[j] = omega_j . n (eq. 6's cosine); k[j] = the
 // continuous visibility K of eq. 8 from the main buffer (1 = unoccluded, also for cosn <= 0);
 // occluder[j] = index v * width + u of the pixel that occludes y_j, or -1. Arrays of n_padded.
 struct PixelOcclusion {

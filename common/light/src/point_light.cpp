@@ -535,7 +535,29 @@ double DistantMedianResidual(const Rows& r, const PointLightOptions& o, int grou
 }
 
 // p90 angle (degrees) between the direction to a lamp at p from each point (3 values per point)
-// and the irradiance-weighted (1 / r^2) mean of those directions: the auto rule's spread.
+// and the unit direction d / scale (d given unnormalised with its length as scale, as the callers
+// have it); -1 when no point differs from p.
+double SpreadAroundDeg(const double* p, const std::vector<double>& points, const double d[3],
+                       double scale) {
+  const size_t np = points.size() / 3;
+  std::vector<double> angles;
+  for (size_t i = 0; i < np; ++i) {
+    const double* x = &points[3 * i];
+    const double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
+    const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    if (!(len > 0)) continue;
+    double dot = 0;
+    for (int c = 0; c < 3; ++c) dot += v[c] / len * d[c] / scale;
+    angles.push_back(std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / kPi);
+  }
+  if (angles.empty()) return -1;
+  const size_t q = std::min(angles.size() - 1, angles.size() * 9 / 10);
+  std::nth_element(angles.begin(), angles.begin() + q, angles.end());
+  return angles[q];
+}
+
+// SpreadAroundDeg around the irradiance-weighted (1 / r^2) mean of those directions: the auto
+// rule's spread (0 without any direction).
 double LampSpreadDeg(const double* p, const std::vector<double>& points, double min_d2) {
   const size_t np = points.size() / 3;
   double mean[3] = {0, 0, 0};
@@ -550,20 +572,7 @@ double LampSpreadDeg(const double* p, const std::vector<double>& points, double 
   }
   const double ml = std::sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2]);
   if (!(ml > 0)) return 0;
-  std::vector<double> angles;
-  for (size_t i = 0; i < np; ++i) {
-    const double* x = &points[3 * i];
-    const double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
-    const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    if (!(len > 0)) continue;
-    double dot = 0;
-    for (int c = 0; c < 3; ++c) dot += v[c] / len * mean[c] / ml;
-    angles.push_back(std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / kPi);
-  }
-  if (angles.empty()) return 0;
-  const size_t q = std::min(angles.size() - 1, angles.size() * 9 / 10);
-  std::nth_element(angles.begin(), angles.begin() + q, angles.end());
-  return angles[q];
+  return std::max(0.0, SpreadAroundDeg(p, points, mean, ml));
 }
 
 }  // namespace
@@ -872,22 +881,9 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
     for (int c = 0; c < 3; ++c) e.dominant_direction[c] = static_cast<float>(top.direction[c] / dl);
     e.intensity = static_cast<float>(top.irradiance * inv);
     // Spread: p90 angle between the lamp's direction at a point and the mean direction.
-    std::vector<double> angles;
-    const double* p = &th[3 * order[0]];
-    for (size_t i = 0; i < np; ++i) {
-      const double* x = &points[3 * i];
-      const double v[3] = {p[0] - x[0], p[1] - x[1], p[2] - x[2]};
-      const double len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-      if (!(len > 0)) continue;
-      double dot = 0;
-      for (int c = 0; c < 3; ++c) dot += v[c] / len * e.dominant_direction[c];
-      angles.push_back(std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / kPi);
-    }
-    if (!angles.empty()) {
-      const size_t q = std::min(angles.size() - 1, angles.size() * 9 / 10);
-      std::nth_element(angles.begin(), angles.begin() + q, angles.end());
-      out.spread_deg = static_cast<float>(angles[q]);
-    }
+    const double d[3] = {e.dominant_direction[0], e.dominant_direction[1], e.dominant_direction[2]};
+    const double spread = SpreadAroundDeg(&th[3 * order[0]], points, d, 1.0);
+    if (spread >= 0) out.spread_deg = static_cast<float>(spread);
   }
   // Fit quality: weighted R^2 in image units.
   const std::vector<double> res = Residuals(point, r, a_point, th.data());

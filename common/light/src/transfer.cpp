@@ -199,7 +199,6 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
   occ_params.max_occ2 = max_occ2;
   occ_params.bias = bias, occ_params.bias_rel = bias_rel;
   occ_params.chi = chi, occ_params.inv_chi = inv_chi;
-  occ_params.n_directions = n_dir;
   occ_params.n_padded = n_padded_;
   occ_params.dir_x = directions_soa_.data();
   occ_params.dir_y = directions_soa_.data() + n_padded_;
