@@ -496,6 +496,39 @@ TEST(TumTest, FreiburgIntrinsicsAndCameraInfoOverrides) {
             "cannot read calibration file '" + options.camera_info_path + "'");
 }
 
+TEST(TumTest, CameraInfoYamlInTheFolderIsReadAndTheOptionWins) {
+  TempDir dir;
+  TumFolder fr1(dir, "rgbd_dataset_freiburg1_xyz");
+  WriteText(fr1.path + "/camera_info.yaml",
+            "image_width: 40\nimage_height: 30\ncamera_name: folder\n"
+            "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [90, 0, 19.5, 0, 91, 14.5, 0, 0, 1]\n"
+            "distortion_model: plumb_bob\n"
+            "distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0, 0, 0, 0, 0]\n");
+  {
+    // The folder's file replaces the freiburg1 table.
+    const std::unique_ptr<Source> source = OpenDataset(fr1.path);
+    const auto info = View<msgs::CameraInfo>(*source->Next());
+    EXPECT_EQ(info->fx, 90);
+    EXPECT_EQ(info->fy, 91);
+    EXPECT_EQ(info->cx, 19.5);
+    EXPECT_EQ(info->depth_scale, 0.001);
+  }
+  const std::string option_file = dir.File("option.yaml");
+  WriteText(option_file,
+            "camera_matrix: {rows: 3, cols: 3, data: [70, 0, 19.5, 0, 71, 14.5, 0, 0, 1]}\n");
+  DatasetOptions options;
+  options.camera_info_path = option_file;
+  {
+    const std::unique_ptr<Source> source = OpenDataset(fr1.path, options);
+    EXPECT_EQ(View<msgs::CameraInfo>(*source->Next())->fx, 70);
+  }
+  // A malformed folder file is an error naming it.
+  WriteText(fr1.path + "/camera_info.yaml", "image_width: 40\n");
+  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path); }),
+            "calibration file '" + fr1.path +
+                "/camera_info.yaml': missing camera_matrix (expected a ROS camera_info YAML file)");
+}
+
 TEST(TumTest, MalformedListsAndMissingFiles) {
   TempDir dir;
   TumFolder folder(dir);

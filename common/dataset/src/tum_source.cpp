@@ -381,9 +381,16 @@ std::unique_ptr<Source> OpenTum(const std::string& path, const DatasetOptions& o
     }
     depth_size = first_depth.size();
   }
-  const Intrinsics intrinsics =
-      ResolveIntrinsics(options, TumIntrinsics(path), static_cast<uint32_t>(first_rgb.cols),
-                        static_cast<uint32_t>(first_rgb.rows));
+  // A camera_info.yaml in the folder (ROS camera_info) replaces the freiburg table; the
+  // camera_info_path option still wins over both.
+  DatasetOptions with_folder_info = options;
+  const std::string folder_info = (std::filesystem::path(path) / "camera_info.yaml").string();
+  if (with_folder_info.camera_info_path.empty() && std::filesystem::is_regular_file(folder_info)) {
+    with_folder_info.camera_info_path = folder_info;
+  }
+  const Intrinsics intrinsics = ResolveIntrinsics(with_folder_info, TumIntrinsics(path),
+                                                  static_cast<uint32_t>(first_rgb.cols),
+                                                  static_cast<uint32_t>(first_rgb.rows));
   return std::make_unique<TumSource>(path, options, std::move(frames), has_depth, has_pose,
                                      intrinsics, first_rgb.size(), depth_size);
 }
