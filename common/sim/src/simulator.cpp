@@ -12,6 +12,7 @@
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/pose.h"
 #include "probeless/msgs/sh_light.h"
+#include "sensor.h"
 
 namespace probeless::sim {
 namespace {
@@ -57,40 +58,8 @@ Transform PoseAtTime(const std::vector<PoseKey>& keys, double t) {
   return out;
 }
 
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-
-// Deterministic uniform and normal variates from a splitmix64 stream.
-class Rng {
- public:
-  explicit Rng(uint64_t seed) : state_(seed) {}
-  double Uniform() {
-    state_ = SplitMix64(state_);
-    return static_cast<double>(state_ >> 11) * (1.0 / 9007199254740992.0);
-  }
-  // Box-Muller; the second value of each pair is kept for the next call.
-  double Normal() {
-    if (has_spare_) {
-      has_spare_ = false;
-      return spare_;
-    }
-    const double u1 = std::max(Uniform(), 1e-300);
-    const double u2 = Uniform();
-    const double r = std::sqrt(-2 * std::log(u1));
-    spare_ = r * std::sin(2 * std::numbers::pi * u2);
-    has_spare_ = true;
-    return r * std::cos(2 * std::numbers::pi * u2);
-  }
-
- private:
-  uint64_t state_;
-  double spare_ = 0;
-  bool has_spare_ = false;
-};
+using internal::Rng;
+using internal::SplitMix64;
 
 raytrace::Mesh BuildMesh(const Scenario& scenario, const ObjectSpec& o,
                          std::vector<Vec3>* landmarks) {
@@ -283,36 +252,7 @@ SimFrame Simulator::Render(uint64_t index) {
         f.rgb[i] = raytrace::LinearToSrgb8(static_cast<float>(v));
       }
     }
-    for (int x = 0; x < c.width; ++x) {
-      const size_t p = first + x;
-      double z = z0[p];
-      if (z <= 0) continue;
-      if (sensor.depth_holes) {
-        bool edge = false;
-        const int dx[4] = {-1, 1, 0, 0};
-        const int dy[4] = {0, 0, -1, 1};
-        for (int k = 0; k < 4 && !edge; ++k) {
-          const int nx = x + dx[k];
-          const int ny = y + dy[k];
-          if (nx < 0 || ny < 0 || nx >= c.width || ny >= c.height) continue;
-          const float zn = z0[static_cast<size_t>(ny) * c.width + nx];
-          edge = zn <= 0 || std::abs(zn - z) > sensor.edge_ratio * z;
-        }
-        if (edge) continue;
-      }
-      if (sensor.quantisation > 0) {
-        const double step = sensor.quantisation * z * z;
-        z = std::round(z / step) * step;
-      }
-      if (sensor.depth_noise) {
-        const double sigma = sensor.depth_noise_a + sensor.depth_noise_b * (z - 0.4) * (z - 0.4);
-        z += sigma * rng.Normal();
-      }
-      if (sensor.dropout > 0 && rng.Uniform() < sensor.dropout) continue;
-      if (z < sensor.depth_min_m || z > sensor.depth_max_m) continue;
-      const double mm = std::round(z * 1000);
-      f.depth_mm[p] = mm >= 1 && mm <= 65535 ? static_cast<uint16_t>(mm) : 0;
-    }
+    internal::SensorDepthRow(z0.data(), c.width, c.height, y, sensor, rng, &f.depth_mm[first]);
   });
 
   // Ground truth: light at the camera in the camera frame, and the face (with the light at the
