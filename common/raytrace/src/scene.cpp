@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <deque>
 #include <exception>
 #include <numbers>
@@ -67,6 +68,7 @@ struct Scene::Impl {
   std::vector<int> object_of_geom;
   std::vector<DirectionalLight> directional;
   std::vector<PointLight> points;
+  std::vector<AreaLight> areas;
   Environment environment;
   bool committed = false;
   bool structure_changed = true;
@@ -91,6 +93,93 @@ Scene::~Scene() {
   rtcReleaseDevice(impl_->device);
 }
 
+namespace {
+
+std::string Str(float v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%g", v);
+  return buffer;
+}
+
+void ValidateMaterial(const Material& m) {
+  const std::string what = "Scene::AddObject: Material::";
+  if (!(m.roughness > 0 && m.roughness <= 1)) {
+    throw RaytraceError(what + "roughness must be in (0, 1], got " + Str(m.roughness));
+  }
+  if (!(m.specular_f0 >= 0 && m.specular_f0 <= 1)) {
+    throw RaytraceError(what + "specular_f0 must be in [0, 1], got " + Str(m.specular_f0));
+  }
+  if (m.pattern.kind != ProceduralPattern::Kind::kNone && !(m.pattern.period_m > 0)) {
+    throw RaytraceError(what + "pattern.period_m must be > 0, got " + Str(m.pattern.period_m));
+  }
+  if (m.pattern.kind == ProceduralPattern::Kind::kStripes && Length(m.pattern.axis) == 0) {
+    throw RaytraceError(what + "pattern.axis must be non-zero for stripes");
+  }
+  if (!(m.emission.x >= 0 && m.emission.y >= 0 && m.emission.z >= 0)) {
+    throw RaytraceError(what + "emission must be >= 0");
+  }
+}
+
+// Integer lattice hash to [0, 1): the value-noise lattice (fixed, no seed: a solid texture).
+float LatticeValue(int64_t x, int64_t y, int64_t z) {
+  uint64_t h = static_cast<uint64_t>(x) * 0x9E3779B97F4A7C15ull ^
+               static_cast<uint64_t>(y) * 0xC2B2AE3D27D4EB4Full ^
+               static_cast<uint64_t>(z) * 0x165667B19E3779F9ull;
+  h ^= h >> 31;
+  h *= 0xBF58476D1CE4E5B9ull;
+  h ^= h >> 29;
+  return static_cast<float>(h >> 40) * (1.0f / 16777216.0f);
+}
+
+// Trilinear value noise with smoothstep weights, in [0, 1].
+float ValueNoise(Vec3 p) {
+  const float fx = std::floor(p.x), fy = std::floor(p.y), fz = std::floor(p.z);
+  const auto ix = static_cast<int64_t>(fx), iy = static_cast<int64_t>(fy),
+             iz = static_cast<int64_t>(fz);
+  auto smooth = [](float t) { return t * t * (3 - 2 * t); };
+  const float ax = smooth(p.x - fx), ay = smooth(p.y - fy), az = smooth(p.z - fz);
+  float result = 0;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = (c >> 2) & 1;
+    const float w = (dx ? ax : 1 - ax) * (dy ? ay : 1 - ay) * (dz ? az : 1 - az);
+    result += w * LatticeValue(ix + dx, iy + dy, iz + dz);
+  }
+  return result;
+}
+
+}  // namespace
+
+Vec3 PatternAlbedo(const ProceduralPattern& pattern, Vec3 base, Vec3 p) {
+  using Kind = ProceduralPattern::Kind;
+  if (pattern.kind == Kind::kNone || !(pattern.period_m > 0)) return base;
+  // Offsets keep faces of round-sized boxes off the cell boundaries (no flicker between cells).
+  constexpr float kOffset = 0.1234f;
+  const Vec3 q = p / pattern.period_m;
+  float t = 0;
+  switch (pattern.kind) {
+    case Kind::kChecker: {
+      const auto cell = static_cast<int64_t>(std::floor(q.x + kOffset)) +
+                        static_cast<int64_t>(std::floor(q.y + kOffset)) +
+                        static_cast<int64_t>(std::floor(q.z + kOffset));
+      t = (cell & 1) != 0 ? 1.0f : 0.0f;
+      break;
+    }
+    case Kind::kStripes: {
+      const float s = Dot(q, Normalize(pattern.axis)) + kOffset;
+      t = s - std::floor(s) >= 0.5f ? 1.0f : 0.0f;
+      break;
+    }
+    case Kind::kValueNoise:
+      // Two octaves for a less grid-like look; weights sum to 1 so t stays in [0, 1].
+      t = 0.7f * ValueNoise(q + Vec3{kOffset, kOffset, kOffset}) +
+          0.3f * ValueNoise(q * 2.0f + Vec3{17.1f, 5.3f, 9.7f});
+      break;
+    case Kind::kNone:
+      break;
+  }
+  return base * (1 - t) + pattern.color_b * t;
+}
+
 int Scene::AddObject(Mesh mesh, Material material, const Transform& object_to_world, uint32_t id) {
   if (id == 0) throw RaytraceError("Scene::AddObject: object id must be > 0");
   mesh.Validate("Scene::AddObject");
@@ -98,6 +187,7 @@ int Scene::AddObject(Mesh mesh, Material material, const Transform& object_to_wo
   if (material.texture && mesh.uvs.empty()) {
     throw RaytraceError("Scene::AddObject: textured material needs a mesh with uvs");
   }
+  ValidateMaterial(material);
   if (mesh.normals.empty()) mesh.ComputeNormals();
   Object o;
   o.mesh = std::move(mesh);
@@ -175,6 +265,8 @@ const std::vector<DirectionalLight>& Scene::directional_lights() const {
 }
 std::vector<PointLight>& Scene::point_lights() { return impl_->points; }
 const std::vector<PointLight>& Scene::point_lights() const { return impl_->points; }
+std::vector<AreaLight>& Scene::area_lights() { return impl_->areas; }
+const std::vector<AreaLight>& Scene::area_lights() const { return impl_->areas; }
 Environment& Scene::environment() { return impl_->environment; }
 const Environment& Scene::environment() const { return impl_->environment; }
 
@@ -355,6 +447,8 @@ SurfacePoint Scene::Surface(const Ray& ray, const Hit& hit) const {
     albedo =
         o.mesh.colors[tri[0]] * w0 + o.mesh.colors[tri[1]] * hit.u + o.mesh.colors[tri[2]] * hit.v;
   }
+  s.object_position = p0 * w0 + o.mesh.positions[tri[1]] * hit.u + o.mesh.positions[tri[2]] * hit.v;
+  albedo = PatternAlbedo(m.pattern, albedo, s.object_position);
   s.albedo = albedo * m.albedo_scale;
   s.material = &m;
   s.object_id = o.id;
