@@ -1,5 +1,7 @@
 // scene_light: per-pixel SH radiance transfer by screen-space directional occlusion and the scene
-// light estimated from it (Gruber et al. 2015 §5; probeless_light, docs/light.md).
+// light estimated from it (Gruber et al. 2015 §5; probeless_light, docs/light.md). A thin node:
+// params -> light::ScenePipelineOptions, messages -> light::SceneFrame, light::ScenePipeline (the
+// same object scene_light_eval measures) -> messages.
 //
 // Inputs (relative names, remap them in launch files):
 //   mode gbuffer (default): `scene/gbuffer` (msgs::GeometryBuffer, G_r from fusion) triggers a
@@ -58,11 +60,8 @@
 #include <string>
 #include <vector>
 
-#include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
-#include "probeless/light/point_light.h"
-#include "probeless/light/reliability.h"
-#include "probeless/light/transfer.h"
+#include "probeless/light/pipeline.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 
@@ -70,13 +69,13 @@ namespace {
 
 using namespace probeless;
 
-int Run(int argc, char** argv) {
-  node::Node node(argc, argv, "scene_light");
-  const std::string mode = node.Param("mode", "gbuffer");
-  if (mode != "gbuffer" && mode != "depth") {
-    throw node::UsageError("scene_light: mode must be gbuffer or depth, got '" + mode + "'");
-  }
-  light::TransferOptions to;
+// The node's params as pipeline options (defaults: docs/nodes.md, scene_light). Throws
+// node::UsageError for a bad param, LightError for a bad light model name.
+light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::string& mode) {
+  light::ScenePipelineOptions po;
+  po.source = mode == "gbuffer" ? light::SceneGeometrySource::kGeometryBuffer
+                                : light::SceneGeometrySource::kDepthImage;
+  light::TransferOptions& to = po.transfer;
   to.bands = node.Param("bands", 4);
   to.directions = node.Param("directions", 32);
   to.subsample = node.Param("subsample", 1);
@@ -85,7 +84,7 @@ int Run(int argc, char** argv) {
   to.seed = static_cast<uint64_t>(node.Param<int64_t>("seed", 1));
   to.threads = node.Param("threads", 2);
   to.analytic_unoccluded = node.Param("analytic_unoccluded", true);
-  light::EstimateOptions eo;
+  light::EstimateOptions& eo = po.estimate;
   eo.albedo = static_cast<float>(node.Param("albedo", 0.6));
   eo.stride = node.Param("stride", 4);
   eo.robust = node.Param("robust", true);
@@ -93,15 +92,16 @@ int Run(int argc, char** argv) {
   eo.direction_bands = node.Param("direction_bands", 2);
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
-  const bool publish_transfer = node.Param("publish_transfer", true);
-  const bool publish_indirect = node.Param("publish_indirect", false);
   const std::string gbuffer_normals = node.Param("gbuffer_normals", "fusion");
   if (gbuffer_normals != "fusion" && gbuffer_normals != "depth") {
     throw node::UsageError("scene_light: gbuffer_normals must be fusion or depth, got '" +
                            gbuffer_normals + "'");
   }
-  const bool normal_filter = node.Param("normal_filter", false);
-  light::DepthGeometryOptions dgo;
+  // "depth": central differences max(2, w / 160) apart on G_r's depth (denoised by the merge).
+  po.gbuffer_normals =
+      gbuffer_normals == "depth" ? light::GBufferNormals::kCentral : light::GBufferNormals::kGiven;
+  po.normal_filter = node.Param("normal_filter", false);
+  light::DepthGeometryOptions& dgo = po.depth_geometry;
   const std::string depth_normals = node.Param("depth_normals", "auto");
   if (depth_normals != "auto" && depth_normals != "edge" && depth_normals != "central") {
     throw node::UsageError("scene_light: depth_normals must be auto, edge or central, got '" +
@@ -113,56 +113,46 @@ int Run(int argc, char** argv) {
   dgo.smooth_radius = node.Param("smooth_radius", -1);
   dgo.step = node.Param("normal_step", -1);
   if (dgo.step == 0) throw node::UsageError("scene_light: normal_step must be -1 or >= 1, got 0");
-  const bool reliability_weights = node.Param("reliability_weights", false);
-  light::TemporalOptions tmo;
-  tmo.frames = node.Param("temporal_frames", 1);
-  tmo.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
-  tmo.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
-  light::SceneLightOptions so;
-  so.model = light::ParseLightModel(node.Param("light_model", "auto"));  // LightError if bad
-  so.distant = eo;
-  so.point.albedo = eo.albedo;
-  so.point.albedo_groups = eo.albedo_groups;
-  so.point.max_lamps = node.Param("lamps", 1);
+  po.reliability_weights = node.Param("reliability_weights", false);
+  po.temporal.frames = node.Param("temporal_frames", 1);
+  po.temporal.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
+  po.temporal.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
+  po.light_model = light::ParseLightModel(node.Param("light_model", "auto"));  // LightError if bad
+  po.point.max_lamps = node.Param("lamps", 1);
   // Cast shadows: on by default for the full variant (fused courtyard_sun 36.8 -> 7.6 deg), off for
   // OursFast (the search's ~10 ms wall would break its 15 ms budget). On raw sensor depth (depth
   // mode) only with the image cues (shadow_image_cues, default on in depth mode): without them
   // quantised depth lets a wrong occluder explain a shadow (12 consecutive courtyard frames:
   // 22.5 -> 43.6 deg; with them 6.5 deg); docs/light.md "Cast shadows".
-  so.shadow.enabled = node.Param("shadows", to.subsample == 1);
-  so.shadow.image_cues = node.Param("shadow_image_cues", mode == "depth");
-  so.shadow.stride = node.Param("shadow_stride", 8);
-  so.shadow.threads = to.threads;
-  if (so.shadow.stride < 1) {
+  po.shadow.enabled = node.Param("shadows", to.subsample == 1);
+  const bool image_cues = node.Param("shadow_image_cues", mode == "depth");
+  // gbuffer mode: the param is the search's on G_r; on the frame's depth image the cues are on
+  // (light::RawDepthShadowOptions). depth mode: the search's on the depth image.
+  po.shadow.image_cues = mode == "gbuffer" && image_cues;
+  po.depth_image_cues = mode == "gbuffer" || image_cues;
+  po.shadow.stride = node.Param("shadow_stride", 8);
+  po.shadow.threads = to.threads;
+  if (po.shadow.stride < 1) {
     throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +
-                           std::to_string(so.shadow.stride));
+                           std::to_string(po.shadow.stride));
   }
-  if (so.point.max_lamps < 1 || so.point.max_lamps > 2) {
+  if (po.point.max_lamps < 1 || po.point.max_lamps > 2) {
     throw node::UsageError("scene_light: lamps must be 1 or 2, got " +
-                           std::to_string(so.point.max_lamps));
+                           std::to_string(po.point.max_lamps));
   }
-  if (so.model != light::LightModel::kDistant && tmo.frames > 1) {
+  if (po.light_model != light::LightModel::kDistant && po.temporal.frames > 1) {
     // The temporal accumulator is a distant-light fit: the default auto gives way to it.
     if (node.HasParamOverride("light_model")) {
       throw node::UsageError("scene_light: temporal_frames > 1 needs light_model distant");
     }
-    so.model = light::LightModel::kDistant;
+    po.light_model = light::LightModel::kDistant;
   }
-  if (so.model != light::LightModel::kDistant && reliability_weights) {
+  if (po.light_model != light::LightModel::kDistant && po.reliability_weights) {
     // The row weights are the distant fit's (EstimateLight): the default auto gives way to it.
     if (node.HasParamOverride("light_model")) {
       throw node::UsageError("scene_light: reliability_weights needs light_model distant");
     }
-    so.model = light::LightModel::kDistant;
-  }
-  const bool use_aux = node.Param("use_aux", false);
-  const int aux_wait_ms = node.Param("aux_wait_ms", 50);
-  if (aux_wait_ms < 0) {
-    throw node::UsageError("scene_light: aux_wait_ms must be >= 0, got " +
-                           std::to_string(aux_wait_ms));
-  }
-  if (use_aux && mode != "gbuffer") {
-    throw node::UsageError("scene_light: use_aux needs mode gbuffer (the views come from fusion)");
+    po.light_model = light::LightModel::kDistant;
   }
   // gbuffer mode: the shadow search on the frame's own depth image (aligned with the camera image,
   // with the image cues) instead of G_r, whose merged depth and the image disagree at shadow edges
@@ -173,11 +163,32 @@ int Run(int argc, char** argv) {
     throw node::UsageError("scene_light: shadow_depth must be raw or gbuffer, got '" +
                            shadow_depth + "'");
   }
-  const bool raw_shadows = mode == "gbuffer" && so.shadow.enabled && shadow_depth == "raw";
-  const light::ShadowOptions raw_shadow_options = light::RawDepthShadowOptions(so.shadow);
-  light::TemporalLightEstimator temporal(tmo);  // throws LightError for bad options
-  light::PointLightTracker point_tracker;       // warm starts of the point fit across frames
-  light::TransferComputer computer(to);         // throws LightError for bad options
+  po.shadow_geometry = shadow_depth == "raw" ? light::ShadowGeometry::kDepthImage
+                                             : light::ShadowGeometry::kGeometryBuffer;
+  po.indirect = node.Param("publish_indirect", false);
+  return po;
+}
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "scene_light");
+  const std::string mode = node.Param("mode", "gbuffer");
+  if (mode != "gbuffer" && mode != "depth") {
+    throw node::UsageError("scene_light: mode must be gbuffer or depth, got '" + mode + "'");
+  }
+  const light::ScenePipelineOptions po = OptionsFromParams(node, mode);
+  const bool publish_transfer = node.Param("publish_transfer", true);
+  const bool use_aux = node.Param("use_aux", false);
+  const int aux_wait_ms = node.Param("aux_wait_ms", 50);
+  if (aux_wait_ms < 0) {
+    throw node::UsageError("scene_light: aux_wait_ms must be >= 0, got " +
+                           std::to_string(aux_wait_ms));
+  }
+  if (use_aux && mode != "gbuffer") {
+    throw node::UsageError("scene_light: use_aux needs mode gbuffer (the views come from fusion)");
+  }
+  const bool raw_shadows = mode == "gbuffer" && po.shadow.enabled &&
+                           po.shadow_geometry == light::ShadowGeometry::kDepthImage;
+  light::ScenePipeline pipeline(po);  // throws LightError for bad options
 
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
   bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
@@ -199,7 +210,7 @@ int Run(int argc, char** argv) {
     std::span<const std::byte> bytes() const { return {storage.data() + offset, size}; }
   };
   std::deque<HeldDepth> raw_depths;  // oldest first
-  std::vector<float> raw_depth_m, raw_normals;
+  std::vector<float> raw_depth_m;
   int64_t raw_used = 0, raw_missing = 0, raw_size_mismatch = 0;
   auto hold_depth = [&](bus::Sample&& s) {
     const auto d = msgs::ReadMessage<msgs::Image>(s.data());
@@ -260,20 +271,18 @@ int Run(int argc, char** argv) {
   bus::Publisher light_pub = node.CreatePublisher<msgs::ShLight>("scene/light");
   std::optional<bus::Publisher> transfer_pub, indirect_pub;
   size_t transfer_capacity = 0, indirect_capacity = 0;
-  std::optional<light::DominantLight> dominant;  // the last published estimate's (eq. 10)
 
   std::optional<msgs::CameraInfo> info;
   std::optional<bus::Sample> image;  // the latest image sample (held)
-  std::vector<float> grey, depth, normals, reliability;
+  std::vector<float> grey, depth;
   std::vector<uint8_t> rgb;  // the image's sRGB bytes for the albedo groups
-  light::TransferResult result;
   int64_t frames = 0, published = 0;
   int64_t last_stamp = std::numeric_limits<int64_t>::min();  // the last processed frame's
   bool warned = false;
 
   auto process = [&](bus::Sample&& sample) {
     msgs::Header header;
-    light::GeometryView view;
+    light::SceneFrame frame;
     if (mode == "gbuffer") {
       const auto g = msgs::ReadMessage<msgs::GeometryBuffer>(sample.data());
       if (!info || !image) {
@@ -282,20 +291,13 @@ int Run(int argc, char** argv) {
         return;
       }
       header = g->header;
-      view = light::ViewOfGeometryBuffer(*g, g.payload, *info);
-      if (gbuffer_normals == "depth" || normal_filter) {
-        depth.assign(view.depth.begin(), view.depth.end());
-        if (gbuffer_normals == "depth") {
-          // Central differences max(2, w / 160) pixels apart on G_r's depth (already denoised by
-          // the merge: no smoothing), as scene_light_eval --fused-normal-step 4 at 640 x 480.
-          light::NormalsFromDepth(depth, view.width, view.height, view.intrinsics, &normals, 0.05f,
-                                  std::max(2, view.width / 160));
-        } else {
-          normals.assign(view.normals.begin(), view.normals.end());
-        }
-        view.depth = depth;
-        view.normals = normals;
-      }
+      const light::GeometryView view = light::ViewOfGeometryBuffer(*g, g.payload, *info);
+      frame.width = view.width;
+      frame.height = view.height;
+      frame.intrinsics = view.intrinsics;
+      frame.gbuffer_depth = view.depth;
+      frame.gbuffer_normals = view.normals;
+      frame.gbuffer_colour = view.colour;
     } else {
       const auto d = msgs::ReadMessage<msgs::Image>(sample.data());
       if (!info || !image) {
@@ -304,36 +306,23 @@ int Run(int argc, char** argv) {
         return;
       }
       header = d->header;
-      light::GeometryFromDepthImage(*d, d.payload, *info, &depth, &normals, dgo,
-                                    reliability_weights ? &reliability : nullptr);
-      view = {static_cast<int>(d->width),
-              static_cast<int>(d->height),
-              light::IntrinsicsFrom(*info, d->width, d->height),
-              depth,
-              normals,
-              {}};
+      light::DepthFromImage(*d, d.payload, *info, &depth);
+      frame.width = static_cast<int>(d->width);
+      frame.height = static_cast<int>(d->height);
+      frame.intrinsics = light::IntrinsicsFrom(*info, d->width, d->height);
+      frame.depth_image = depth;
     }
-    if (normal_filter) {
-      // view.normals is `normals` here (the depth mode, or copied above).
-      light::FilterNormals(view.depth, view.width, view.height, view.intrinsics, {}, normals);
-    }
-    if (reliability_weights && mode == "gbuffer") {
-      // G_r is denoised by the merge: the smoothed-depth noise model.
-      light::NormalReliabilityOptions ro;
-      ro.noise_quadratic = dgo.smoothed_noise_quadratic;
-      light::NormalReliability(view.depth, view.width, view.height, view.intrinsics, view.normals,
-                               ro, &reliability);
-    }
-    const std::span<const float> weights =
-        reliability_weights ? std::span<const float>(reliability) : std::span<const float>();
+    frame.stamp_ns = header.stamp_ns;
     const auto img = msgs::ReadMessage<msgs::Image>(image->data());
     if (img->header.sequence != header.sequence) {
       node.Debug() << "image sequence " << img->header.sequence << " used for frame "
                    << header.sequence;
     }
-    light::GreyFromImage(*img, img.payload, view.width, view.height, &grey, &rgb);
-    const bool indirect = publish_indirect && dominant.has_value();
-    // Stamps going backwards (a restarted source): what is held for the old stream never matches.
+    light::GreyFromImage(*img, img.payload, frame.width, frame.height, &grey, &rgb);
+    frame.grey = grey;
+    frame.colour = rgb;
+    // Stamps going backwards (a restarted source): what is held for the old stream never matches
+    // (the pipeline resets its own state).
     if (header.stamp_ns < last_stamp) {
       aux_queue.clear();
       raw_depths.clear();
@@ -361,13 +350,11 @@ int Run(int argc, char** argv) {
         aux = {};
         ++aux_bad;
       }
+      frame.aux = &aux;
     }
-    computer.Compute(view, aux, indirect ? &*dominant : nullptr, &result);
-    // The shadow search's geometry: G_r, or (raw_shadows) the depth image with the G_r's stamp.
-    light::GeometryView shadow_view = view;
-    const light::ShadowOptions* shadow_options = &so.shadow;
     if (raw_shadows) {
-      // Depth images Spin has not handed over yet (acked here, as Spin would).
+      // The shadow search's geometry: the depth image with the G_r's stamp (else G_r). Depth
+      // images Spin has not handed over yet are taken (and acked) here, as Spin would.
       while (auto s = raw_depth_sub->TryTake()) {
         const bus::MessageInfo received = s->info();
         hold_depth(std::move(*s));
@@ -375,62 +362,36 @@ int Run(int argc, char** argv) {
       }
       const auto it = std::find_if(raw_depths.begin(), raw_depths.end(),
                                    [&](const auto& d) { return d.stamp_ns == header.stamp_ns; });
-      if (it != raw_depths.end()) {
-        const auto d = msgs::ReadMessage<msgs::Image>(it->bytes());
-        light::GeometryFromDepthImage(*d, d.payload, *info, &raw_depth_m, &raw_normals, dgo);
-        shadow_view = {static_cast<int>(d->width),
-                       static_cast<int>(d->height),
-                       light::IntrinsicsFrom(*info, d->width, d->height),
-                       raw_depth_m,
-                       raw_normals,
-                       {}};
-        shadow_options = &raw_shadow_options;
-        ++raw_used;
-      } else {
+      if (it == raw_depths.end()) {
         if (raw_missing == 0) {
           node.Warn() << "no camera/depth with the G_r's stamp " << header.stamp_ns
                       << ": the shadow search uses G_r for such frames";
         }
         ++raw_missing;
-      }
-      if (shadow_view.width != view.width || shadow_view.height != view.height) {
+      } else if (const auto d = msgs::ReadMessage<msgs::Image>(it->bytes());
+                 static_cast<int>(d->width) != frame.width ||
+                 static_cast<int>(d->height) != frame.height) {
         if (raw_size_mismatch == 0) {
-          node.Warn() << "camera/depth is " << shadow_view.width << "x" << shadow_view.height
-                      << ", the G_r " << view.width << "x" << view.height
+          node.Warn() << "camera/depth is " << d->width << "x" << d->height << ", the G_r "
+                      << frame.width << "x" << frame.height
                       << ": the shadow search uses G_r for such frames";
         }
         ++raw_size_mismatch;
-        --raw_used;
         ++raw_missing;
-        shadow_view = view;
-        shadow_options = &so.shadow;
+      } else {
+        light::DepthFromImage(*d, d.payload, *info, &raw_depth_m);
+        frame.depth_image = raw_depth_m;
+        ++raw_used;
       }
       // Depth images up to this G_r's stamp can match no later G_r.
       std::erase_if(raw_depths, [&](const HeldDepth& d) { return d.stamp_ns <= header.stamp_ns; });
     }
-    light::LightEstimate e;
-    if (tmo.frames > 1) {
-      e = temporal.Estimate(result, grey, eo, rgb, nullptr, weights);
-    } else if (so.model == light::LightModel::kDistant) {
-      e = light::EstimateLight(result, grey, eo, rgb, weights);
-      if (so.shadow.enabled && e.valid) {
-        light::RefineLightWithShadows(shadow_view, grey, *shadow_options, rgb, &e);
-      }
-    } else {
-      // The shadow refinement is EstimateSceneLight's (distant model chosen), on shadow_view.
-      light::SceneLightOptions scene = so;
-      scene.shadow.enabled = false;
-      light::SceneLightResult r =
-          light::EstimateSceneLight(view, result, grey, scene, rgb, &point_tracker);
-      if (so.shadow.enabled && r.used == light::LightModel::kDistant && r.light.valid) {
-        light::RefineLightWithShadows(shadow_view, grey, *shadow_options, rgb, &r.light);
-      }
-      e = std::move(r.light);
-      if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
-        const auto& p = r.point.lamps[0].position;
-        node.Debug() << "frame " << header.sequence << ": point model, lamp at (" << p[0] << ", "
-                     << p[1] << ", " << p[2] << ") m, camera frame";
-      }
+    const light::ScenePipelineResult& r = pipeline.Process(frame);
+    const light::LightEstimate& e = r.light;
+    if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
+      const auto& p = r.point.lamps[0].position;
+      node.Debug() << "frame " << header.sequence << ": point model, lamp at (" << p[0] << ", "
+                   << p[1] << ", " << p[2] << ") m, camera frame";
     }
     ++frames;
     if (e.valid) {
@@ -441,6 +402,7 @@ int Run(int argc, char** argv) {
       light_pub.Publish(std::move(loan));
       ++published;
     }
+    const light::TransferResult& result = *r.transfer;
     if (publish_transfer) {
       const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
       const size_t bytes = msgs::TransferBuffer::MessageBytesFor(w, h, cc);
@@ -458,14 +420,7 @@ int Run(int argc, char** argv) {
       std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
       transfer_pub->Publish(std::move(loan));
     }
-    // The next frame's bounce light (eq. 10): only from a light with a direction and power.
-    const float* d = e.dominant_direction.data();
-    if (e.valid && e.intensity > 0 && d[0] * d[0] + d[1] * d[1] + d[2] * d[2] > 0.5f) {
-      dominant = light::DominantLight{e.dominant_direction, e.intensity};
-    } else {
-      dominant.reset();
-    }
-    if (indirect && !result.indirect.empty()) {
+    if (r.has_indirect) {
       const size_t bytes =
           msgs::Image::MessageBytesFor(result.width, result.height, msgs::Encoding::kRgb32f);
       if (!indirect_pub || bytes > indirect_capacity) {

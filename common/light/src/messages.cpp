@@ -79,12 +79,10 @@ AuxiliaryBuffers AuxiliaryFromMessage(const msgs::AuxiliaryViews& message,
   return out;
 }
 
-void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
-                            const msgs::CameraInfo& info, std::vector<float>* depth_m,
-                            std::vector<float>* normals, const DepthGeometryOptions& options,
-                            std::vector<float>* reliability) {
+void DepthFromImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                    const msgs::CameraInfo& info, std::vector<float>* depth_m) {
   const int w = static_cast<int>(depth.width), h = static_cast<int>(depth.height);
-  const Intrinsics k = IntrinsicsFrom(info, w, h);
+  IntrinsicsFrom(info, w, h);  // the size check (and finite intrinsics)
   depth_m->resize(static_cast<size_t>(w) * h);
   if (depth.encoding == msgs::Encoding::kDepth16) {
     const double scale = info.depth_scale > 0 ? info.depth_scale : 0.001;
@@ -100,10 +98,19 @@ void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte>
       }
     }
   } else {
-    throw LightError("light::GeometryFromDepthImage: depth encoding " +
+    throw LightError("light::DepthFromImage: depth encoding " +
                      std::string(msgs::EncodingName(depth.encoding)) +
                      " is not depth16 or float32");
   }
+}
+
+void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                            const msgs::CameraInfo& info, std::vector<float>* depth_m,
+                            std::vector<float>* normals, const DepthGeometryOptions& options,
+                            std::vector<float>* reliability) {
+  const int w = static_cast<int>(depth.width), h = static_cast<int>(depth.height);
+  const Intrinsics k = IntrinsicsFrom(info, w, h);
+  DepthFromImage(depth, payload, info, depth_m);
   // Raw sensor depth is quantised: DepthGeometry smooths it when its measured noise calls for it.
   DepthGeometry(*depth_m, w, h, k, options, normals, reliability);
 }

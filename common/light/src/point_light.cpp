@@ -4,6 +4,8 @@
 // surface points (the quantity SurfaceLightingTruth defines).
 #include "probeless/light/point_light.h"
 
+#include <time.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -918,6 +920,17 @@ PointLightEstimate EstimatePointLight(const GeometryView& g, std::span<const flo
   return out;
 }
 
+namespace {
+
+// CPU time of the calling thread (ms): the point fit runs on it alone.
+double ThreadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+}  // namespace
+
 SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult& transfer,
                                     std::span<const float> intensity,
                                     const SceneLightOptions& options,
@@ -945,9 +958,11 @@ SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult&
                              out.distant.dominant_direction[2] != 0;
   PointLightOptions po = options.point;
   po.select_model = options.model == LightModel::kAuto;
+  const double cpu0 = ThreadCpuMs();
   out.point =
       EstimatePointLight(g, intensity, po, bands, &transfer, colour,
                          has_direction ? &out.distant.dominant_direction : nullptr, tracker);
+  out.point_thread_cpu_ms = ThreadCpuMs() - cpu0;
   const bool use = options.model == LightModel::kPoint ? out.point.valid : out.point.prefers_point;
   if (use) {
     out.light = out.point.light;

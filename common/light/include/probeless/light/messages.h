@@ -36,6 +36,13 @@ GeometryView ViewOfGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const
 AuxiliaryBuffers AuxiliaryFromMessage(const msgs::AuxiliaryViews& message,
                                       std::span<const std::byte> payload);
 
+// The depth in metres (width x height of `depth`, 0 = none) of a depth16 image (depth_scale of
+// `info`, 0.001 when unset) or a float32 one (metres; non-finite and <= 0 -> 0): the input of
+// ScenePipeline's depth image. Throws LightError for another encoding or a size other than
+// `info`'s.
+void DepthFromImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                    const msgs::CameraInfo& info, std::vector<float>* depth_m);
+
 // A G-buffer from a depth16 (or float32 metres) image: depth in metres (depth_scale of `info`,
 // 0.001 when unset for depth16) and normals by DepthGeometry (`options`; default kAuto: a clean
 // image gets edge-aware normals, unsmoothed, step width / 320; a Kinect-like one is smoothed

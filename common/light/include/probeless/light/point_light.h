@@ -165,6 +165,7 @@ struct SceneLightResult {
   LightEstimate distant;                   // EstimateLight's
   PointLightEstimate point;                // valid only if the point model ran (model != kDistant)
   ShadowEstimate shadow;                   // valid only if shadow.enabled found a direction
+  double point_thread_cpu_ms = NAN;        // the point fit's thread CPU time (NAN: it did not run)
 };
 
 // EstimateLight, then (model kPoint / kAuto, and the distant fit had enough pixels) the point fit

@@ -1,0 +1,200 @@
+// The scene-light pipeline of one image stream (Gruber et al. 2015 §5 and what probeless adds to
+// it): geometry (a G-buffer G_r or a raw depth image, normals, their filter and reliability) ->
+// radiance transfer by SSDO (eq. 6-9, OursFast, the indirect term of eq. 10-12) -> the light (the
+// distant SH fit of §5.2, its temporal accumulation, or the point-lamp model chosen by
+// EstimateSceneLight) -> the distant light's direction refined by cast shadows. One object per
+// stream holds what carries over between frames (warm starts of the point fit, the temporal
+// history, the previous frame's dominant light for the indirect term, the previous pose). The
+// node (nodes/scene_light) and the evaluation (tools/scene_light_eval) run this same object, so
+// what is measured is what ships (docs/light.md, "Scene pipeline").
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+
+#include "probeless/light/estimate.h"
+#include "probeless/light/point_light.h"
+#include "probeless/light/reliability.h"
+#include "probeless/light/shadow.h"
+#include "probeless/light/transfer.h"
+
+namespace probeless::light {
+
+// Where a frame's geometry comes from (the node's `mode`).
+enum class SceneGeometrySource {
+  kGeometryBuffer,  // SceneFrame::geometry: a G-buffer with normals (fusion's G_r, a render)
+  kDepthImage,      // SceneFrame::depth_image: raw depth, normals by DepthGeometry (no recon)
+};
+
+// The normals of a G-buffer input (the node's `gbuffer_normals`).
+enum class GBufferNormals {
+  kGiven,    // the buffer's own (fusion's)
+  kCentral,  // recomputed from its depth: NormalsFromDepth (central differences)
+  kEdge,     // recomputed from its depth: NormalsWithReliability (edge-aware), with reliability
+};
+
+// The geometry of the shadow search for a G-buffer input (the node's `shadow_depth`).
+enum class ShadowGeometry {
+  // SceneFrame::depth_image when given (aligned with the camera image, while G_r's merged depth
+  // is not at shadow edges: fused courtyard_sun 7.6 -> 4.0 deg; docs/light.md "Cast shadows"),
+  // else the G-buffer.
+  kDepthImage,
+  kGeometryBuffer,  // always the G-buffer
+};
+
+// Every option of the node and the evaluation; the defaults are the node's (docs/nodes.md,
+// scene_light) for subsample 1.
+struct ScenePipelineOptions {
+  SceneGeometrySource source = SceneGeometrySource::kGeometryBuffer;
+  // SSDO transfer (eq. 6-9); the node sets max_occluder_distance_m = 2 x radius_m (the defaults).
+  TransferOptions transfer;
+  // The distant fit (§5.2). Its albedo, albedo_groups and albedo_invariant are also the point
+  // fit's (point's own are overwritten: one albedo model for both models).
+  EstimateOptions estimate;
+
+  // G-buffer input: its normals, recomputed at `gbuffer_normal_step` pixels (-1 = max(2, width /
+  // 160): the step of the node's `gbuffer_normals: depth`) after SmoothDepth of radius
+  // `gbuffer_smooth_radius` (0 = none; G_r is denoised by the merge).
+  GBufferNormals gbuffer_normals = GBufferNormals::kGiven;
+  int gbuffer_normal_step = -1;
+  int gbuffer_smooth_radius = 0;
+  // Depth images (source kDepthImage, and the shadow search's depth image): DepthGeometry's
+  // options; depth_geometry.normals also parameterises kEdge above (noise_quadratic < 0 = the
+  // smoothed depth's, smoothed_noise_quadratic).
+  DepthGeometryOptions depth_geometry;
+  // FilterNormals on the fit's normals (after they are computed; the depth stays).
+  bool normal_filter = false;
+  NormalFilterOptions filter;
+  // The normals' reliability as the fit's row weights (DepthGeometry's or NormalsWithReliability's
+  // when they made the normals, else NormalReliability with the smoothed-depth noise model).
+  // Needs light_model kDistant.
+  bool reliability_weights = false;
+
+  // frames > 1: TemporalLightEstimator (the distant fit over the last frames; needs light_model
+  // kDistant, no shadow refinement).
+  TemporalOptions temporal;
+  // EstimateSceneLight's model choice (auto: point lamps when the selection rule prefers them).
+  LightModel light_model = LightModel::kAuto;
+  PointLightOptions point;
+  // Warm starts of the point fit from the previous frame's lamp (PointLightTracker); false: every
+  // frame cold (an ablation of the evaluation).
+  bool point_warm_start = true;
+
+  // Cast shadows refine the distant light's direction (RefineLightWithShadows) when the distant
+  // model is used and temporal.frames == 1. The node turns them off for OursFast (subsample 4):
+  // the search's ~10 ms wall breaks its 15 ms budget. `shadow.image_cues` applies to a search on
+  // a G-buffer, `depth_image_cues` to one on a depth image (raw sensor depth needs them: without
+  // them its quantisation lets a wrong occluder explain a shadow; RawDepthShadowOptions).
+  ShadowOptions shadow;
+  bool depth_image_cues = true;
+  ShadowGeometry shadow_geometry = ShadowGeometry::kDepthImage;
+
+  // The one-bounce indirect buffer (eq. 10-12) from the previous frame's dominant light: in the
+  // result's transfer from the second frame on (none after a frame without a light).
+  bool indirect = false;
+};
+
+// One frame's input. All spans are borrowed for the duration of Process only. Frames: the camera
+// optical frame (x right, y down, z forward) of this frame.
+struct SceneFrame {
+  // Header stamp (ns). A stamp before the previous frame's (a restarted source) resets the state
+  // (Reset) before the frame is processed.
+  int64_t stamp_ns = 0;
+  int width = 0;
+  int height = 0;
+  Intrinsics intrinsics;
+  std::span<const float> grey;      // linear grey I_c, width * height (GreyFromImage)
+  std::span<const uint8_t> colour;  // sRGB bytes, 3 per pixel, for the albedo groups; empty = none
+  // Source kGeometryBuffer: G_r, width x height: depth (metres along z, 0 = none), unit normals
+  // (3 per pixel, facing the camera; (0, 0, 0) = none) and optional sRGB colour (3 per pixel; the
+  // indirect term's reflector colour A(s_j); empty = grey 1).
+  std::span<const float> gbuffer_depth;
+  std::span<const float> gbuffer_normals;
+  std::span<const uint8_t> gbuffer_colour;
+  // Raw depth (metres, 0 = none), width * height: the geometry of source kDepthImage; with
+  // kGeometryBuffer and shadow_geometry kDepthImage the shadow search's (empty = the G-buffer's).
+  std::span<const float> depth_image;
+  // Auxiliary orthographic views for the transfer's occlusion test (§5.1); borrowed.
+  const AuxiliaryBuffers* aux = nullptr;
+  // Optional camera-to-world rotation (row-major 3 x 3, any fixed world frame): with the previous
+  // frame's, the temporal fit rotates its history into this frame (d_now = R_now^T R_prev d_prev);
+  // without it the camera is taken as not rotating.
+  std::optional<std::array<double, 9>> camera_to_world_rotation;
+};
+
+// Per-frame timings (milliseconds).
+struct ScenePipelineTimings {
+  double ms_geometry = 0;      // wall: normals, filter, reliability, the shadow depth's normals
+  double ms_transfer = 0;      // wall: TransferComputer::Compute
+  double cpu_ms_transfer = 0;  // process CPU of the transfer (all threads)
+  double ms_estimate = 0;      // wall: the fit, the point fit and the shadow search
+  double cpu_ms_estimate = 0;  // thread CPU of the same (the calling thread)
+  double cpu_ms_point = NAN;   // thread CPU of the point fit (NAN: it did not run)
+  double cpu_ms_shadow = NAN;  // process CPU of the shadow search (NAN: it did not run)
+};
+
+// One frame's output. The views, spans and the transfer borrow buffers of the pipeline (or of the
+// frame's input): valid until the next Process, and only as long as the input's buffers.
+struct ScenePipelineResult {
+  int64_t stamp_ns = 0;
+  // The light of the frame (camera frame, white, transfer.bands bands): the chosen model's, with
+  // the shadow refinement applied; what the node publishes when valid.
+  LightEstimate light;
+  LightModel used = LightModel::kDistant;  // kDistant or kPoint
+  LightEstimate distant;                   // the distant fit before the shadow refinement
+  PointLightEstimate point;                // valid only if the point model ran
+  // The shadow search: its geometry and options (set whenever shadows are on, also for a frame
+  // where the search did not run: the point model chosen, no valid light), shadow_on_depth_image
+  // when the geometry is the frame's depth image (else the fit's); shadow_ran when it ran
+  // (evaluations > 0), `shadow` its estimate.
+  bool shadow_ran = false;
+  bool shadow_on_depth_image = false;
+  ShadowEstimate shadow;
+  ShadowOptions shadow_options;
+  GeometryView shadow_geometry;
+  // The geometry of the fit and the transfer (after normals, filter), its reliability (empty
+  // unless reliability_weights) and DepthGeometry's measured noise of the depth image (NaN: not
+  // measured or no depth image).
+  GeometryView geometry;
+  std::span<const float> reliability;
+  float measured_noise_quadratic = NAN;
+  // T of the frame (TransferResult::indirect filled when the indirect buffer was computed).
+  const TransferResult* transfer = nullptr;
+  bool has_indirect = false;
+  ScenePipelineTimings timings;
+};
+
+// The pipeline of one stream. Not thread-safe; one per stream (the evaluation runs one per input
+// and variant).
+class ScenePipeline {
+ public:
+  // Throws LightError("light::ScenePipeline: ...") for options that cannot work together or are
+  // out of range (and as TransferComputer / TemporalLightEstimator for theirs).
+  explicit ScenePipeline(const ScenePipelineOptions& options = {});
+  ~ScenePipeline();
+  ScenePipeline(ScenePipeline&&) noexcept;
+  ScenePipeline& operator=(ScenePipeline&&) noexcept;
+  ScenePipeline(const ScenePipeline&) = delete;
+  ScenePipeline& operator=(const ScenePipeline&) = delete;
+
+  const ScenePipelineOptions& options() const;
+
+  // Runs one frame. Throws LightError("light::ScenePipeline::Process: ...") for an input that
+  // does not match the options or itself (missing geometry / depth image, sizes), and as the
+  // library calls it makes (e.g. ValidateGeometryView's messages). The previous light and pose are
+  // updated only by a frame that completes.
+  const ScenePipelineResult& Process(const SceneFrame& frame);
+
+  // Forgets everything carried between frames (warm start, temporal history, previous light and
+  // pose), e.g. after a cut or tracking loss.
+  void Reset();
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace probeless::light
