@@ -99,7 +99,8 @@ TEST(Errors, MismatchedSizesAndOptions) {
   info.distortion_count = 5;
   info.distortion[0] = 0.1;
   EXPECT_EQ(ErrorOf([&] { IntrinsicsFromCameraInfo(info); }),
-            "camera_info: lens distortion is not supported (rectify the depth)");
+            "camera_info: lens distortion (plumb_bob) is not supported: run the rectify node in "
+            "front and feed its depth_rect, image_rect and camera_info_rect (docs/rectify.md)");
 }
 
 TEST(Errors, GeometryBufferRoundTrip) {

@@ -16,7 +16,10 @@ Intrinsics IntrinsicsFromCameraInfo(const msgs::CameraInfo& info) {
   if (info.distortion_model != msgs::DistortionModel::kNone) {
     for (uint32_t i = 0; i < info.distortion_count && i < msgs::kMaxDistortionCoefficients; ++i) {
       if (info.distortion[i] != 0) {
-        throw ReconError("camera_info: lens distortion is not supported (rectify the depth)");
+        throw ReconError("camera_info: lens distortion (" +
+                         std::string(msgs::DistortionModelName(info.distortion_model)) +
+                         ") is not supported: run the rectify node in front and feed its "
+                         "depth_rect, image_rect and camera_info_rect (docs/rectify.md)");
       }
     }
   }

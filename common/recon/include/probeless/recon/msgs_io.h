@@ -16,7 +16,7 @@
 namespace probeless::recon {
 
 // Intrinsics of a CameraInfo. Throws ReconError "camera_info: ..." for NaN/inf or non-positive
-// focal lengths, a non-positive size, or lens distortion other than none (rectify first).
+// focal lengths, a non-positive size, or non-zero lens distortion (rectify first: nodes/rectify).
 Intrinsics IntrinsicsFromCameraInfo(const msgs::CameraInfo& info);
 
 // Depth in metres from a depth16 (millimetres; `metres_per_unit` from camera_info.depth_scale,

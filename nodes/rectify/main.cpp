@@ -1,0 +1,154 @@
+// rectify: lens-distortion rectification of a camera stream, the role of ROS image_proc /
+// depth_image_proc rectify (rectify::Rectifier; docs/rectify.md). Subscribes `image` (rgb8, bgr8,
+// mono8, mono16, rgb32f), `depth` (depth16 or float32; a colour-only camera simply never
+// publishes it) and `camera_info`. Publishes, with each input's header, `image_rect` and
+// `depth_rect` (same size and encoding, written straight into the loaned bus slot: colour
+// bilinear, depth nearest or edge-aware) and `camera_info_rect` (plumb_bob with five zeros, the
+// new camera matrix; ROS's P = [K | 0] with the default alpha). Maps are computed once per
+// calibration, again only when camera_info changes. A camera without distortion passes through
+// (one copy into the slot, no resampling). Frames that arrive before the first camera_info wait
+// (the latest of each stream) until it comes.
+//
+// Params: alpha (-1: keep the calibrated K; 0..1 OpenCV free scaling), depth_interpolation
+// (nearest | edge_aware), depth_edge_tolerance (0.03, fraction of the depth), threads (1: OpenCV
+// threads of the remap). Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a malformed or
+// inconsistent camera_info or image (one line naming the topic), 1 otherwise.
+#include "probeless/node/main.h"
+
+#include <chrono>
+#include <optional>
+#include <string>
+
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+#include "probeless/rectify/rectify.h"
+
+namespace {
+
+using namespace probeless;
+
+// One rectified output stream: its publisher, created on the first frame (the slot size follows
+// the image size) and recreated when a larger image comes.
+struct Output {
+  std::string topic;
+  std::optional<bus::Publisher> publisher;
+  size_t capacity = 0;
+  uint64_t published = 0;
+};
+
+int Run(int argc, char** argv) {
+  node::Node node(argc, argv, "rectify");
+  rectify::RectifyOptions options;
+  options.alpha = node.Param("alpha", options.alpha);
+  const std::string interpolation = node.Param("depth_interpolation", "nearest");
+  if (interpolation == "nearest") {
+    options.depth_interpolation = rectify::DepthInterpolation::kNearest;
+  } else if (interpolation == "edge_aware") {
+    options.depth_interpolation = rectify::DepthInterpolation::kEdgeAware;
+  } else {
+    throw node::NodeError(
+        "rectify: param depth_interpolation must be nearest or edge_aware, got '" + interpolation +
+        "'");
+  }
+  options.depth_edge_tolerance = node.Param("depth_edge_tolerance", options.depth_edge_tolerance);
+  const int threads = node.Param("threads", 1);
+  if (threads < 1) throw node::NodeError("rectify: param threads must be >= 1");
+  if (!(options.alpha <= 1) || !(options.depth_edge_tolerance > 0)) {
+    throw node::NodeError(
+        "rectify: param alpha must be <= 1 (< 0 keeps K) and depth_edge_tolerance > 0");
+  }
+  rectify::SetThreads(threads);
+  for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
+
+  const std::string info_topic = node.ResolveTopicName("camera_info");
+  const std::string image_topic = node.ResolveTopicName("image");
+  const std::string depth_topic = node.ResolveTopicName("depth");
+  bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("image", {.queue_depth = 4});
+  bus::Subscriber depth_sub = node.CreateSubscriber<msgs::Image>("depth", {.queue_depth = 4});
+  bus::Subscriber info_sub =
+      node.CreateSubscriber<msgs::CameraInfo>("camera_info", {.queue_depth = 4});
+  bus::Publisher info_pub = node.CreatePublisher<msgs::CameraInfo>("camera_info_rect");
+  Output image_out{"image_rect"}, depth_out{"depth_rect"};
+
+  std::optional<rectify::Rectifier> rectifier;
+  std::optional<bus::Sample> waiting_image, waiting_depth;
+  uint64_t map_builds = 0;
+  double total_ms = 0;
+  uint64_t timed = 0;
+
+  auto rectify_frame = [&](bus::Sample& sample, const std::string& in_topic, Output& out) {
+    const auto in = msgs::ReadMessage<msgs::Image>(sample.data());
+    if (msgs::BytesPerPixel(in->encoding) == 0) {
+      throw rectify::RectifyError(in_topic + ": invalid image encoding " +
+                                  std::to_string(static_cast<uint32_t>(in->encoding)));
+    }
+    const size_t bytes = msgs::Image::MessageBytesFor(in->width, in->height, in->encoding);
+    if (!out.publisher || bytes > out.capacity) {
+      out.publisher.reset();
+      out.publisher.emplace(
+          node.CreatePublisher<msgs::Image>(out.topic, {.max_message_bytes = bytes}));
+      out.capacity = bytes;
+    }
+    const auto t0 = std::chrono::steady_clock::now();
+    bus::Loan loan = out.publisher->Borrow(bytes);
+    msgs::WriteView<msgs::Image> view = msgs::WriteMessage<msgs::Image>(loan.data());
+    rectifier->Rectify(*in, in.payload, *view, view.payload, in_topic);
+    out.publisher->Publish(std::move(loan));
+    total_ms +=
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    ++timed;
+    ++out.published;
+  };
+
+  auto on_info = [&](bus::Sample&& sample) {
+    const msgs::CameraInfo info = *msgs::ReadMessage<msgs::CameraInfo>(sample.data());
+    if (!rectifier || !rectifier->Matches(info)) {
+      const auto t0 = std::chrono::steady_clock::now();
+      rectifier.emplace(info, options, info_topic);
+      ++map_builds;
+      const double ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      if (rectifier->passthrough()) {
+        node.Info() << info_topic << ": " << info.width << "x" << info.height
+                    << ", no lens distortion: frames pass through";
+      } else {
+        node.Info() << info_topic << ": " << info.width << "x" << info.height << " "
+                    << msgs::DistortionModelName(info.distortion_model) << ": maps in " << ms
+                    << " ms, rectified fx " << rectifier->rectified_info().fx << " fy "
+                    << rectifier->rectified_info().fy << " cx " << rectifier->rectified_info().cx
+                    << " cy " << rectifier->rectified_info().cy;
+      }
+    }
+    msgs::CameraInfo rectified = rectifier->rectified_info();
+    rectified.header = info.header;
+    info_pub.PublishCopy(std::as_bytes(std::span(&rectified, 1)));
+    if (waiting_image) rectify_frame(*waiting_image, image_topic, image_out);
+    if (waiting_depth) rectify_frame(*waiting_depth, depth_topic, depth_out);
+    waiting_image.reset();
+    waiting_depth.reset();
+  };
+  auto on_frame = [&](const std::string& topic, Output& out, std::optional<bus::Sample>& waiting) {
+    return [&, topic](bus::Sample&& sample) {
+      if (!rectifier) {
+        if (!waiting) node.Info() << topic << ": waiting for " << info_topic;
+        waiting = std::move(sample);  // the bus slot is held, not copied
+        return;
+      }
+      rectify_frame(sample, topic, out);
+    };
+  };
+  node.Spin({{&info_sub, on_info},
+             {&image_sub, on_frame(image_topic, image_out, waiting_image)},
+             {&depth_sub, on_frame(depth_topic, depth_out, waiting_depth)}});
+  node.Info() << "rectified " << image_out.published << " images and " << depth_out.published
+              << " depth images (" << (timed ? total_ms / static_cast<double>(timed) : 0.0)
+              << " ms each on average), maps built " << map_builds << " time(s)";
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return probeless::node::RunMain<probeless::rectify::RectifyError>(
+      "rectify", [&] { return Run(argc, argv); });
+}
