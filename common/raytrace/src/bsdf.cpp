@@ -37,6 +37,12 @@ float SmithLambda(Vec3 w, float alpha) {
   return 0.5f * (-1 + std::sqrt(1 + alpha * alpha * tan2));
 }
 
+// v / |v| with one division (hot path).
+Vec3 Unit(Vec3 v) {
+  const float n2 = Dot(v, v);
+  return n2 > 0 ? v * (1 / std::sqrt(n2)) : Vec3{};
+}
+
 // Visible-normal sample of GGX (Heitz 2018) for local wo with wo.z > 0: the microfacet normal.
 Vec3 SampleVisibleNormal(Vec3 wo, float alpha, float u1, float u2) {
   const Vec3 v = Normalize({alpha * wo.x, alpha * wo.y, wo.z});
@@ -50,7 +56,7 @@ Vec3 SampleVisibleNormal(Vec3 wo, float alpha, float u1, float u2) {
   const float s = 0.5f * (1 + v.z);
   p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * p2;
   const Vec3 nh = t1 * p1 + t2 * p2 + v * std::sqrt(std::max(0.0f, 1 - p1 * p1 - p2 * p2));
-  return Normalize({alpha * nh.x, alpha * nh.y, std::max(1e-7f, nh.z)});
+  return Unit({alpha * nh.x, alpha * nh.y, std::max(1e-7f, nh.z)});
 }
 
 Vec3 Reflect(Vec3 w, Vec3 h) { return h * (2 * Dot(w, h)) - w; }
@@ -165,24 +171,28 @@ Bsdf::Bsdf(Vec3 albedo, float f0, float roughness, Vec3 n, Vec3 wo)
 }
 
 Vec3 Bsdf::Eval(Vec3 wi_world, float* pdf) const {
-  const Vec3 wi = frame_.ToLocal(wi_world);
+  return EvalLocal(frame_.ToLocal(wi_world), pdf);
+}
+
+Vec3 Bsdf::EvalLocal(Vec3 wi, float* pdf) const {
   *pdf = 0;
   if (wi.z <= 0) return {};
   const Vec3 wo = wo_local_;
+  const float diffuse_pdf = wi.z * (1 / kPi);
   if (f0_ <= 0) {
-    *pdf = wi.z / kPi;
-    return albedo_ * (wi.z / kPi);
+    *pdf = diffuse_pdf;
+    return albedo_ * diffuse_pdf;
   }
-  const float diffuse_pdf = wi.z / kPi;
   const Vec3 diffuse =
-      albedo_ * (diffuse_scale_ * (1 - GgxAlbedo(wi.z, roughness_, f0_)) * wi.z / kPi);
-  const Vec3 h = Normalize(wo + wi);
+      albedo_ * (diffuse_scale_ * (1 - GgxAlbedo(wi.z, roughness_, f0_)) * diffuse_pdf);
+  const Vec3 h = Unit(wo + wi);
   const float o_h = std::max(0.0f, Dot(wo, h));
   const float d = GgxD(h.z, alpha_);
   const float g2 = 1 / (1 + lambda_o_ + SmithLambda(wi, alpha_));
   const float fresnel = f0_ + (1 - f0_) * SchlickWeight(o_h);
-  const float spec = fresnel * d * g2 / (4 * wo.z);
-  const float spec_pdf = d / ((1 + lambda_o_) * 4 * wo.z);
+  const float quarter_over_mu_o = 0.25f / wo.z;
+  const float spec = fresnel * d * g2 * quarter_over_mu_o;
+  const float spec_pdf = d * quarter_over_mu_o / (1 + lambda_o_);
   *pdf = p_specular_ * spec_pdf + (1 - p_specular_) * diffuse_pdf;
   return diffuse + Vec3{spec, spec, spec};
 }
@@ -199,10 +209,10 @@ bool Bsdf::Sample(float u_lobe, float u1, float u2, Vec3* wi_world, Vec3* weight
     wi = {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0f, 1 - u1))};
   }
   if (wi.z <= 0) return false;
-  *wi_world = Normalize(frame_.ToWorld(wi));
-  const Vec3 f = Eval(*wi_world, pdf);
+  const Vec3 f = EvalLocal(wi, pdf);
   if (!(*pdf > 0)) return false;
-  *weight = f / *pdf;
+  *wi_world = Unit(frame_.ToWorld(wi));
+  *weight = f * (1 / *pdf);
   return true;
 }
 

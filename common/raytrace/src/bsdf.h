@@ -38,6 +38,8 @@ class Bsdf {
   bool specular() const { return f0_ > 0; }
 
  private:
+  Vec3 EvalLocal(Vec3 wi, float* pdf) const;  // Eval for a direction in the local frame
+
   Frame3 frame_;
   Vec3 albedo_;
   Vec3 wo_local_;

@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "bsdf.h"
+#include "embree_internal.h"
+#include "scene_access.h"
 #include "sh_basis.h"
 
 namespace probeless::raytrace {
@@ -25,6 +27,12 @@ std::string Str(double v) {
   char buffer[32];
   std::snprintf(buffer, sizeof(buffer), "%g", v);
   return buffer;
+}
+
+// v / |v| with one division (hot paths); (0, 0, 0) for a zero vector.
+inline Vec3 Unit(Vec3 v) {
+  const float n2 = Dot(v, v);
+  return n2 > 0 ? v * (1 / std::sqrt(n2)) : Vec3{};
 }
 
 float Luminance(Vec3 c) { return 0.2126f * c.x + 0.7152f * c.y + 0.0722f * c.z; }
@@ -71,17 +79,19 @@ struct Rng {
 struct Light {
   enum class Kind { kDirectional, kDisc, kPoint, kRectangle, kSphere };
   Kind kind = Kind::kDirectional;
-  Vec3 direction;         // directional / disc: unit, towards the light
-  Vec3 power;             // directional: irradiance; point: intensity; disc / area: radiance
-  float cos_max = 1;      // disc: cos(angular radius)
-  float sin_max = 0;      // disc: sin(angular radius)
-  float solid_angle = 0;  // disc
-  Vec3 position;          // point position; rectangle / sphere centre
-  Vec3 half_u, half_v;    // rectangle
-  Vec3 normal;            // rectangle: the emitting side
-  float area = 0;         // rectangle
-  float radius = 0;       // sphere radius; rectangle: bounding radius
-  float luminance = 0;    // of `power`
+  Vec3 direction;                // directional / disc: unit, towards the light
+  Vec3 power;                    // directional: irradiance; point: intensity; disc / area: radiance
+  float cos_max = 1;             // disc: cos(angular radius)
+  float sin_max = 0;             // disc: sin(angular radius)
+  float solid_angle = 0;         // disc
+  Vec3 position;                 // point position; rectangle / sphere centre
+  Vec3 half_u, half_v;           // rectangle
+  float inv_u2 = 0, inv_v2 = 0;  // rectangle: 1 / |half_u|^2, 1 / |half_v|^2
+  Vec3 frame_t, frame_b;         // disc: tangents around `direction` (cone sampling)
+  Vec3 normal;                   // rectangle: the emitting side
+  float area = 0;                // rectangle
+  float radius = 0;              // sphere radius; rectangle: bounding radius
+  float luminance = 0;           // of `power`
   uint32_t id = 0;
 };
 
@@ -114,6 +124,9 @@ std::vector<Light> PrepareLights(const Scene& scene) {
       l.solid_angle = 2 * kPi * OneMinusCos(l.sin_max * l.sin_max, l.cos_max);
       // Radiance of a disc giving `irradiance` on a surface facing it.
       l.power = d.irradiance / (kPi * l.sin_max * l.sin_max);
+      const internal::Frame3 f(l.direction);
+      l.frame_t = f.t;
+      l.frame_b = f.b;
     } else {
       l.power = d.irradiance;
     }
@@ -148,6 +161,8 @@ std::vector<Light> PrepareLights(const Scene& scene) {
       l.kind = Light::Kind::kRectangle;
       l.half_u = a.half_u;
       l.half_v = a.half_v;
+      l.inv_u2 = 1 / Dot(a.half_u, a.half_u);
+      l.inv_v2 = 1 / Dot(a.half_v, a.half_v);
       l.normal = Normalize(c);
       l.area = 4 * Length(c);
       l.radius = Length(a.half_u + a.half_v);
@@ -174,8 +189,8 @@ float IntersectArea(const Light& l, Vec3 o, Vec3 d, float t_min, float t_max, bo
     const float t = Dot(l.position - o, l.normal) / denom;
     if (!(t > t_min && t < t_max)) return kInf;
     const Vec3 q = o + d * t - l.position;
-    const float s = Dot(q, l.half_u) / Dot(l.half_u, l.half_u);
-    const float r = Dot(q, l.half_v) / Dot(l.half_v, l.half_v);
+    const float s = Dot(q, l.half_u) * l.inv_u2;
+    const float r = Dot(q, l.half_v) * l.inv_v2;
     if (std::abs(s) > 1 || std::abs(r) > 1) return kInf;
     *front = denom < 0;
     return t;
@@ -268,24 +283,39 @@ float LightPdf(const Light& l, Vec3 p, Vec3 w, float t) {
   }
 }
 
-// Direction in the cone of half-angle acos(cos_max) around unit `axis`, uniform in solid angle.
-Vec3 SampleCone(Vec3 axis, float sin2_max, float cos_max, float u1, float u2) {
-  const float one_minus = OneMinusCos(sin2_max, cos_max);
-  const float one_minus_cos = u1 * one_minus;
+// Direction in the cone of half-angle acos(cos_max) around unit `axis` (with tangents t, b),
+// uniform in solid angle.
+Vec3 SampleCone(Vec3 axis, Vec3 t, Vec3 b, float sin2_max, float cos_max, float u1, float u2) {
+  const float one_minus_cos = u1 * OneMinusCos(sin2_max, cos_max);
   const float cos_t = 1 - one_minus_cos;
   const float sin_t = std::sqrt(std::max(0.0f, one_minus_cos * (2 - one_minus_cos)));
   const float phi = 2 * kPi * u2;
-  const internal::Frame3 f(axis);
-  return Normalize(f.ToWorld({sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t}));
+  return Unit(t * (sin_t * std::cos(phi)) + b * (sin_t * std::sin(phi)) + axis * cos_t);
 }
 
 // One next-event sample: the shadow ray and what it adds when unoccluded.
 struct ShadowSample {
-  Ray ray;
   Vec3 contribution;
   uint32_t path = 0;
-  int light = -1;  // the sampled light (not tested as its own occluder)
+  // The sampled light, not tested as its own occluder; -1 = test every area light; -2 = none
+  // (the ray was already tested against all area lights).
+  int light = -1;
 };
+
+void FillRay(const Ray& r, RTCRay& out) {
+  out.org_x = r.origin.x;
+  out.org_y = r.origin.y;
+  out.org_z = r.origin.z;
+  out.tnear = r.t_near;
+  out.dir_x = r.direction.x;
+  out.dir_y = r.direction.y;
+  out.dir_z = r.direction.z;
+  out.time = 0;
+  out.tfar = r.t_far;
+  out.mask = 0xFFFFFFFFu;
+  out.id = 0;
+  out.flags = 0;
+}
 
 struct Path {
   Rng rng;
@@ -300,11 +330,45 @@ struct Path {
   bool final = false;  // the current ray only gathers emitted light (max_bounces reached)
 };
 
+// The wavefront buffers, one set per thread and reused between tasks: large fresh vectors would
+// be mapped and page-faulted anew for every tile.
+struct TracerBuffers {
+  std::vector<Path> paths;
+  std::vector<uint32_t> active, next_active;
+  std::vector<Ray> next_rays;
+  std::vector<RTCRayHit> stream;
+  std::vector<ShadowSample> shadows;
+  std::vector<RTCRay> shadow_stream, shadow_rays;
+  // The callers' per-task inputs and outputs.
+  std::vector<Ray> start;
+  std::vector<Rng> rngs;
+  std::vector<Vec3> radiance;
+};
+
+TracerBuffers& ThreadBuffers() {
+  static thread_local TracerBuffers buffers;
+  return buffers;
+}
+
 // The wavefront path tracer of one batch of paths (one thread; no shared mutable state).
 class Tracer {
  public:
   Tracer(const Scene& scene, const PathTraceOptions& options, const std::vector<Light>& lights)
-      : scene_(scene), options_(options), lights_(lights), importance_(lights.size()) {}
+      : scene_(scene),
+        handle_(internal::SceneAccess::Handle(scene)),
+        options_(options),
+        lights_(lights),
+        importance_(lights.size()),
+        has_emission_(internal::SceneAccess::HasEmission(scene)),
+        b_(ThreadBuffers()),
+        paths_(b_.paths),
+        active_(b_.active),
+        next_active_(b_.next_active),
+        next_rays_(b_.next_rays),
+        stream_(b_.stream),
+        shadows_(b_.shadows),
+        shadow_stream_(b_.shadow_stream),
+        shadow_rays_(b_.shadow_rays) {}
 
   // Traces the paths starting with `start` (unit directions), each with its own random stream;
   // radiance per path into `out` (same order). Returns the number of rays traced.
@@ -315,30 +379,33 @@ class Tracer {
     for (size_t i = 0; i < n; ++i) paths_[i].rng = rngs[i];
     active_.resize(n);
     for (size_t i = 0; i < n; ++i) active_[i] = static_cast<uint32_t>(i);
-    rays_ = start;
+    next_rays_ = start;
     uint64_t traced = 0;
+    bool coherent = true;  // the first wave: camera rays of neighbouring pixels
     while (!active_.empty()) {
-      hits_.resize(rays_.size());
-      scene_.Intersect(rays_, hits_);
-      traced += rays_.size();
+      stream_.resize(next_rays_.size());
+      for (size_t k = 0; k < next_rays_.size(); ++k) FillRay(next_rays_[k], stream_[k].ray);
+      internal::IntersectStream(handle_, stream_.data(), stream_.size(), coherent);
+      coherent = false;
+      traced += stream_.size();
       shadows_.clear();
+      shadow_stream_.clear();
       next_active_.clear();
       next_rays_.clear();
-      for (size_t k = 0; k < active_.size(); ++k) Shade(active_[k], rays_[k], hits_[k]);
+      for (size_t k = 0; k < active_.size(); ++k) Shade(active_[k], stream_[k]);
       if (!shadows_.empty()) {
-        shadow_rays_.resize(shadows_.size());
-        for (size_t i = 0; i < shadows_.size(); ++i) shadow_rays_[i] = shadows_[i].ray;
-        visible_.resize(shadows_.size());
-        scene_.Occluded(shadow_rays_, visible_);
+        // Keep the rays for the area-light test: Embree overwrites tfar of occluded rays.
+        shadow_rays_ = shadow_stream_;
+        internal::OccludedStream(handle_, shadow_stream_.data(), shadow_stream_.size());
         traced += shadows_.size();
         for (size_t i = 0; i < shadows_.size(); ++i) {
-          if (visible_[i] && !BlockedByAreaLight(shadows_[i])) {
+          const bool occluded = std::isinf(shadow_stream_[i].tfar) && shadow_stream_[i].tfar < 0;
+          if (!occluded && !BlockedByAreaLight(shadows_[i], shadow_rays_[i])) {
             paths_[shadows_[i].path].radiance += shadows_[i].contribution;
           }
         }
       }
       std::swap(active_, next_active_);
-      std::swap(rays_, next_rays_);
     }
     out.resize(n);
     for (size_t i = 0; i < n; ++i) out[i] = paths_[i].radiance;
@@ -346,15 +413,22 @@ class Tracer {
   }
 
  private:
-  bool BlockedByAreaLight(const ShadowSample& s) const {
+  bool BlockedByAreaLight(const ShadowSample& s, const RTCRay& r) const {
+    if (s.light == -2) return false;
+    const Vec3 o{r.org_x, r.org_y, r.org_z};
+    const Vec3 d{r.dir_x, r.dir_y, r.dir_z};
     for (size_t i = 0; i < lights_.size(); ++i) {
       if (static_cast<int>(i) == s.light || !IsArea(lights_[i])) continue;
       bool front = false;
-      if (IntersectArea(lights_[i], s.ray.origin, s.ray.direction, 0, s.ray.t_far, &front) < kInf) {
-        return true;
-      }
+      if (IntersectArea(lights_[i], o, d, 0, r.tfar, &front) < kInf) return true;
     }
     return false;
+  }
+
+  void PushShadow(const Ray& ray, const ShadowSample& s) {
+    shadows_.push_back(s);
+    shadow_stream_.emplace_back();
+    FillRay(ray, shadow_stream_.back());
   }
 
   // MIS weight of a BSDF-sampled ray reaching light `l` at distance t.
@@ -366,33 +440,48 @@ class Tracer {
     return PowerHeuristic(p.prev_pdf, select * LightPdf(lights_[l], p.prev_origin, w, t));
   }
 
-  void Shade(uint32_t index, const Ray& ray, const Hit& hit) {
-    Path& p = paths_[index];
-    const float t_geom = hit.object >= 0 ? hit.t : kInf;
-    const LightHit lh = NearestAreaLight(lights_, ray.origin, ray.direction, t_geom);
+  // Radiance (before the path throughput) that the ray (o, d) receives from an area light before
+  // t_geom or, when it escapes (t_geom = inf), from the environment and the sun discs, with the
+  // BSDF-side MIS weights. *absorbed: the ray ended on an area light (front or back).
+  Vec3 Emitted(const Path& p, Vec3 o, Vec3 d, float t_geom, float* t_light, bool* absorbed) const {
+    const LightHit lh = NearestAreaLight(lights_, o, d, t_geom);
+    *t_light = lh.t;
     if (lh.light >= 0) {
-      if (lh.front) {
-        const float w = BsdfSideWeight(p, lh.light, ray.direction, lh.t);
-        p.radiance += p.throughput * lights_[lh.light].power * w;
-      }
-      return;  // an emitter absorbs the path (its back is black)
+      *absorbed = true;
+      if (!lh.front) return {};  // an emitter's back is black
+      return lights_[lh.light].power * BsdfSideWeight(p, lh.light, d, lh.t);
     }
-    if (hit.object < 0) {
-      const Environment& env = scene_.environment();
-      Vec3 l;
-      if (env.scale != 0) {
-        l = ClampNonNegative(internal::EvaluateSh9(env.sh, ray.direction)) * env.scale;
+    *absorbed = false;
+    if (t_geom < kInf) return {};
+    Vec3 l;
+    const Environment& env = scene_.environment();
+    if (env.scale != 0) l = ClampNonNegative(internal::EvaluateSh9(env.sh, d)) * env.scale;
+    for (size_t i = 0; i < lights_.size(); ++i) {
+      const Light& disc = lights_[i];
+      if (disc.kind == Light::Kind::kDisc && Dot(d, disc.direction) >= disc.cos_max) {
+        l += disc.power * BsdfSideWeight(p, static_cast<int>(i), d, kInf);
       }
-      for (size_t i = 0; i < lights_.size(); ++i) {
-        const Light& d = lights_[i];
-        if (d.kind == Light::Kind::kDisc && Dot(ray.direction, d.direction) >= d.cos_max) {
-          l += d.power * BsdfSideWeight(p, static_cast<int>(i), ray.direction, kInf);
-        }
-      }
-      p.radiance += p.throughput * l;
-      return;
     }
-    const SurfacePoint s = scene_.Surface(ray, hit);
+    return l;
+  }
+
+  void Shade(uint32_t index, const RTCRayHit& rh) {
+    Path& p = paths_[index];
+    Ray ray{{rh.ray.org_x, rh.ray.org_y, rh.ray.org_z}, {rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z}};
+    const bool miss = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID;
+    float t_light = kInf;
+    bool absorbed = false;
+    const Vec3 e =
+        Emitted(p, ray.origin, ray.direction, miss ? kInf : rh.ray.tfar, &t_light, &absorbed);
+    p.radiance += p.throughput * e;
+    if (miss || absorbed) return;
+    Hit hit;
+    hit.object = internal::SceneAccess::ObjectOfInstance(scene_, rh.hit.instID[0]);
+    hit.triangle = rh.hit.primID;
+    hit.t = rh.ray.tfar;
+    hit.u = rh.hit.u;
+    hit.v = rh.hit.v;
+    const SurfacePoint s = internal::SceneAccess::Surface(scene_, hit, ray.origin, ray.direction);
     const Material& m = *s.material;
     if (m.emission.x > 0 || m.emission.y > 0 || m.emission.z > 0) {
       p.radiance += p.throughput * m.emission;
@@ -450,6 +539,18 @@ class Tracer {
     p.prev_normal = n;
     p.prev_pdf = pdf;
     p.prev_light_sum = light_sum;
+    if (p.final && !has_emission_) {
+      // The last ray only gathers emitters: without emissive surfaces an occlusion query
+      // (up to the nearest area light, or unbounded towards the sky) is enough.
+      float t_light = kInf;
+      bool absorbed = false;
+      const Vec3 e = Emitted(p, origin, wi, kInf, &t_light, &absorbed);
+      if (MaxComponent(e) > 0) {
+        PushShadow(Ray{origin, wi, 0, t_light < kInf ? t_light : 1e30f},
+                   ShadowSample{p.throughput * e, index, -2});
+      }
+      return;
+    }
     next_rays_.push_back(Ray{origin, wi, 0, 1e30f});
     next_active_.push_back(index);
   }
@@ -471,7 +572,8 @@ class Tracer {
         ray.t_far = 1e30f;
         break;
       case Light::Kind::kDisc:
-        wi = SampleCone(l.direction, l.sin_max * l.sin_max, l.cos_max, u[1], u[2]);
+        wi = SampleCone(l.direction, l.frame_t, l.frame_b, l.sin_max * l.sin_max, l.cos_max, u[1],
+                        u[2]);
         incident = l.power;
         light_pdf = 1 / l.solid_angle;
         ray.direction = wi;
@@ -480,8 +582,9 @@ class Tracer {
       case Light::Kind::kPoint: {
         const Vec3 to = l.position - origin;
         const float r2 = Dot(to, to);
-        wi = to / std::sqrt(r2);
-        incident = l.power / r2;
+        const float inv_r2 = 1 / r2;
+        wi = to * std::sqrt(inv_r2);
+        incident = l.power * inv_r2;
         ray.direction = to;
         ray.t_far = 1 - 1e-4f;
         break;
@@ -491,7 +594,7 @@ class Tracer {
         const Vec3 to = y - origin;
         const float d2 = Dot(to, to);
         const float d = std::sqrt(d2);
-        wi = to / d;
+        wi = to * (1 / d);
         const float cos_l = -Dot(wi, l.normal);
         if (!(cos_l > 0)) return;
         incident = l.power;
@@ -507,7 +610,9 @@ class Tracer {
         if (!(sin2 < 1)) return;
         const float cos_max = std::sqrt(1 - sin2);
         const float d = std::sqrt(d2);
-        wi = SampleCone(to / d, sin2, cos_max, u[1], u[2]);
+        const Vec3 axis = to * (1 / d);
+        const internal::Frame3 f(axis);
+        wi = SampleCone(axis, f.t, f.b, sin2, cos_max, u[1], u[2]);
         bool front = false;
         float t = IntersectArea(l, origin, wi, 0, kInf, &front);
         if (!(t < kInf)) t = d * cos_max;  // grazing the silhouette: the tangent point
@@ -526,25 +631,25 @@ class Tracer {
     if (light_pdf > 0) {
       weight = PowerHeuristic(select * light_pdf, bsdf_pdf) / (select * light_pdf);
     }
-    ShadowSample s;
-    s.ray = ray;
-    s.contribution = p.throughput * f * incident * weight;
-    s.path = index;
-    s.light = IsArea(l) ? static_cast<int>(chosen) : -1;
-    shadows_.push_back(s);
+    PushShadow(ray, ShadowSample{p.throughput * f * incident * weight, index,
+                                 IsArea(l) ? static_cast<int>(chosen) : -1});
   }
 
   const Scene& scene_;
+  RTCScene handle_;
   const PathTraceOptions& options_;
   const std::vector<Light>& lights_;
   std::vector<float> importance_;
-  std::vector<Path> paths_;
-  std::vector<uint32_t> active_, next_active_;
-  std::vector<Ray> rays_, next_rays_;
-  std::vector<Hit> hits_;
-  std::vector<ShadowSample> shadows_;
-  std::vector<Ray> shadow_rays_;
-  std::vector<uint8_t> visible_;
+  bool has_emission_ = false;
+  TracerBuffers& b_;
+  std::vector<Path>& paths_;
+  std::vector<uint32_t>& active_;
+  std::vector<uint32_t>& next_active_;
+  std::vector<Ray>& next_rays_;
+  std::vector<RTCRayHit>& stream_;
+  std::vector<ShadowSample>& shadows_;
+  std::vector<RTCRay>& shadow_stream_;
+  std::vector<RTCRay>& shadow_rays_;
 };
 
 // Runs fn(task) for every task on `pool`, in groups so that `progress` can report from the
@@ -589,6 +694,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
                 ThreadPool* pool) {
   camera.Validate();
   options.Validate();
+  internal::SceneAccess::CheckCommitted(scene, "PathTrace");
   const std::vector<Light> lights = PrepareLights(scene);
   Frame frame;
   frame.width = camera.width;
@@ -665,9 +771,9 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
     Tracer tracer(scene, options, lights);
     const int batch = static_cast<int>(std::max<size_t>(1, kWavePaths / n));
     std::vector<Vec3> sum(n);
-    std::vector<Ray> start;
-    std::vector<Rng> rngs;
-    std::vector<Vec3> radiance;
+    std::vector<Ray>& start = ThreadBuffers().start;
+    std::vector<Rng>& rngs = ThreadBuffers().rngs;
+    std::vector<Vec3>& radiance = ThreadBuffers().radiance;
     for (int s0 = 0; s0 < spp; s0 += batch) {
       const int s1 = std::min(spp, s0 + batch);
       start.clear();
@@ -713,6 +819,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
 std::array<Vec3, 9> IncidentRadianceSh(const Scene& scene, Vec3 point, int directions,
                                        const PathTraceOptions& options, ThreadPool* pool) {
   options.Validate();
+  internal::SceneAccess::CheckCommitted(scene, "IncidentRadianceSh");
   if (directions < 1) {
     throw RaytraceError("IncidentRadianceSh: directions must be >= 1, got " +
                         std::to_string(directions));
@@ -729,8 +836,10 @@ std::array<Vec3, 9> IncidentRadianceSh(const Scene& scene, Vec3 point, int direc
   auto task = [&](size_t t) {
     const size_t begin = t * per_task;
     const size_t end = std::min(count, begin + per_task);
-    std::vector<Ray> start;
-    std::vector<Rng> rngs;
+    std::vector<Ray>& start = ThreadBuffers().start;
+    std::vector<Rng>& rngs = ThreadBuffers().rngs;
+    start.clear();
+    rngs.clear();
     std::vector<Vec3> dirs;
     for (size_t k = begin; k < end; ++k) {
       Rng rng{PathSeed(options.seed, options.frame_index, 0xD1EC7105ull, k, 1)};
@@ -748,7 +857,7 @@ std::array<Vec3, 9> IncidentRadianceSh(const Scene& scene, Vec3 point, int direc
       rngs.push_back(rng);
     }
     Tracer tracer(scene, options, lights);
-    std::vector<Vec3> radiance;
+    std::vector<Vec3>& radiance = ThreadBuffers().radiance;
     tracer.Trace(start, rngs, radiance);
     std::array<Vec3, 9> sh{};
     for (size_t i = 0; i < dirs.size(); ++i) {

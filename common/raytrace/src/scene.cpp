@@ -11,6 +11,7 @@
 
 #include "embree_internal.h"
 #include "probeless/raytrace/render.h"
+#include "scene_access.h"
 #include "sh_basis.h"
 
 namespace probeless::raytrace {
@@ -43,6 +44,7 @@ struct Object {
   Mesh mesh;  // object frame
   Material material;
   Transform transform;
+  std::array<float, 9> rotation{};  // transform.rotation in float, row-major (the path tracer's)
   uint32_t id = 0;
   bool visible = true;
   bool dirty = true;
@@ -53,6 +55,13 @@ struct Object {
   RTCGeometry instance = nullptr;  // the instance in the top-level scene (moves cheaply)
   unsigned geom_id = 0;            // instance id in the top-level scene
 };
+
+void StoreRotation(Object& o) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c)
+      o.rotation[3 * r + c] = static_cast<float>(o.transform.rotation.m[r][c]);
+  }
+}
 
 void ErrorCallback(void*, RTCError code, const char* message) {
   (void)code;
@@ -193,6 +202,7 @@ int Scene::AddObject(Mesh mesh, Material material, const Transform& object_to_wo
   o.mesh = std::move(mesh);
   o.material = std::move(material);
   o.transform = object_to_world;
+  StoreRotation(o);
   o.id = id;
   o.padded_positions.assign(o.mesh.positions.size() * 3 + 1, 0);
   for (size_t i = 0; i < o.mesh.positions.size(); ++i) {
@@ -233,6 +243,7 @@ Object& CheckedObject(std::deque<Object>& objects, int index, const char* what) 
 void Scene::SetObjectTransform(int index, const Transform& object_to_world) {
   Object& o = CheckedObject(impl_->objects, index, "Scene::SetObjectTransform");
   o.transform = object_to_world;
+  StoreRotation(o);
   o.dirty = true;
   impl_->committed = false;
 }
@@ -324,6 +335,28 @@ void Scene::Commit() {
 }
 
 void* Scene::embree_scene() const { return impl_->scene; }
+
+namespace internal {
+
+RTCScene SceneAccess::Handle(const Scene& scene) { return scene.impl_->scene; }
+
+int SceneAccess::ObjectOfInstance(const Scene& scene, unsigned inst_id) {
+  return scene.impl_->object_of_geom[inst_id];
+}
+
+void SceneAccess::CheckCommitted(const Scene& scene, const char* what) {
+  if (!scene.impl_->committed) throw RaytraceError(std::string(what) + ": scene not committed");
+}
+
+bool SceneAccess::HasEmission(const Scene& scene) {
+  for (const Object& o : scene.impl_->objects) {
+    const Vec3 e = o.material.emission;
+    if (o.visible && (e.x > 0 || e.y > 0 || e.z > 0)) return true;
+  }
+  return false;
+}
+
+}  // namespace internal
 
 namespace internal {
 
@@ -421,6 +454,27 @@ void Scene::Occluded(std::span<const Ray> rays, std::span<uint8_t> visible,
   });
 }
 
+namespace {
+// Albedo, object-frame position, material and id of a hit (shared by both Surface variants).
+void SurfaceAlbedo(const Object& o, const std::array<uint32_t, 3>& tri, float w0, float u, float v,
+                   SurfacePoint& s) {
+  const Material& m = o.material;
+  Vec3 albedo = m.albedo;
+  if (m.texture) {
+    const Vec2 a = o.mesh.uvs[tri[0]], b = o.mesh.uvs[tri[1]], c = o.mesh.uvs[tri[2]];
+    albedo = m.texture->Sample(a.u * w0 + b.u * u + c.u * v, a.v * w0 + b.v * u + c.v * v);
+  } else if (!o.mesh.colors.empty()) {
+    albedo = o.mesh.colors[tri[0]] * w0 + o.mesh.colors[tri[1]] * u + o.mesh.colors[tri[2]] * v;
+  }
+  s.object_position =
+      o.mesh.positions[tri[0]] * w0 + o.mesh.positions[tri[1]] * u + o.mesh.positions[tri[2]] * v;
+  albedo = PatternAlbedo(m.pattern, albedo, s.object_position);
+  s.albedo = albedo * m.albedo_scale;
+  s.material = &m;
+  s.object_id = o.id;
+}
+}  // namespace
+
 SurfacePoint Scene::Surface(const Ray& ray, const Hit& hit) const {
   const Object& o = impl_->objects.at(static_cast<size_t>(hit.object));
   const auto& tri = o.mesh.triangles[hit.triangle];
@@ -437,22 +491,40 @@ SurfacePoint Scene::Surface(const Ray& ray, const Hit& hit) const {
   if (Dot(n, ng) < 0) n = -n;
   s.normal = n;
   s.geometric_normal = ng;
-  const Material& m = o.material;
-  Vec3 albedo = m.albedo;
-  if (m.texture) {
-    const Vec2 a = o.mesh.uvs[tri[0]], b = o.mesh.uvs[tri[1]], c = o.mesh.uvs[tri[2]];
-    albedo = m.texture->Sample(a.u * w0 + b.u * hit.u + c.u * hit.v,
-                               a.v * w0 + b.v * hit.u + c.v * hit.v);
-  } else if (!o.mesh.colors.empty()) {
-    albedo =
-        o.mesh.colors[tri[0]] * w0 + o.mesh.colors[tri[1]] * hit.u + o.mesh.colors[tri[2]] * hit.v;
-  }
-  s.object_position = p0 * w0 + o.mesh.positions[tri[1]] * hit.u + o.mesh.positions[tri[2]] * hit.v;
-  albedo = PatternAlbedo(m.pattern, albedo, s.object_position);
-  s.albedo = albedo * m.albedo_scale;
-  s.material = &m;
-  s.object_id = o.id;
+  SurfaceAlbedo(o, tri, w0, hit.u, hit.v, s);
   return s;
 }
+
+namespace internal {
+
+SurfacePoint SceneAccess::Surface(const Scene& scene, const Hit& hit, Vec3 origin, Vec3 direction) {
+  const Object& o = scene.impl_->objects[static_cast<size_t>(hit.object)];
+  const auto& tri = o.mesh.triangles[hit.triangle];
+  const float w0 = 1 - hit.u - hit.v;
+  const float* r = o.rotation.data();
+  auto rotate = [r](Vec3 v) {
+    return Vec3{r[0] * v.x + r[1] * v.y + r[2] * v.z, r[3] * v.x + r[4] * v.y + r[5] * v.z,
+                r[6] * v.x + r[7] * v.y + r[8] * v.z};
+  };
+  auto unit = [](Vec3 v) {
+    const float n2 = Dot(v, v);
+    return n2 > 0 ? v * (1 / std::sqrt(n2)) : Vec3{};
+  };
+  SurfacePoint s;
+  s.position = origin + direction * hit.t;
+  const Vec3 p0 = o.mesh.positions[tri[0]];
+  Vec3 ng = unit(rotate(Cross(o.mesh.positions[tri[1]] - p0, o.mesh.positions[tri[2]] - p0)));
+  Vec3 n = unit(rotate(o.mesh.normals[tri[0]] * w0 + o.mesh.normals[tri[1]] * hit.u +
+                       o.mesh.normals[tri[2]] * hit.v));
+  if (Dot(n, n) == 0) n = ng;
+  if (Dot(ng, direction) > 0) ng = -ng;
+  if (Dot(n, ng) < 0) n = -n;
+  s.normal = n;
+  s.geometric_normal = ng;
+  SurfaceAlbedo(o, tri, w0, hit.u, hit.v, s);
+  return s;
+}
+
+}  // namespace internal
 
 }  // namespace probeless::raytrace

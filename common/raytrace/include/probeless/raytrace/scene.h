@@ -160,6 +160,10 @@ struct SurfacePoint {
   uint32_t object_id = 0;  // the object's id (AddObject)
 };
 
+namespace internal {
+struct SceneAccess;  // the path tracer's private view of the scene (src/scene_access.h)
+}  // namespace internal
+
 class Scene {
  public:
   Scene();
@@ -215,6 +219,7 @@ class Scene {
   void* embree_scene() const;
 
  private:
+  friend struct internal::SceneAccess;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
