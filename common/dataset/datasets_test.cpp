@@ -128,7 +128,9 @@ TEST(SevenScenesTest, FramesInOrderWithTimingValuesAndFrames) {
     EXPECT_EQ(info->fy, 510);
     EXPECT_EQ(info->cx, 31.5);
     EXPECT_EQ(info->cy, 23.5);
-    EXPECT_EQ(info->distortion_model, msgs::DistortionModel::kNone);
+    EXPECT_EQ(info->distortion_model, msgs::DistortionModel::kPlumbBob);  // as ROS: five zeros
+    EXPECT_EQ(info->distortion_count, 5u);
+    for (uint32_t i = 0; i < 5; ++i) EXPECT_EQ(info->distortion[i], 0.0);
     EXPECT_EQ(info->depth_scale, 0.001);
 
     const auto image = View<msgs::Image>(messages[f * 4 + 1]);

@@ -28,6 +28,9 @@ Intrinsics SevenScenesDefaultIntrinsics() {
   intrinsics.fy = 585;
   intrinsics.cx = 320;
   intrinsics.cy = 240;
+  // No distortion, written as ROS writes an undistorted camera: plumb_bob with five zeros.
+  intrinsics.model = msgs::DistortionModel::kPlumbBob;
+  intrinsics.distortion.assign(5, 0.0);
   return intrinsics;
 }
 
