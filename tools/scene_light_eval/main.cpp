@@ -1,4 +1,8 @@
 // scene_light_eval: evaluates probeless_light's full (Ours) and fast (OursFast) variants.
+// Every variant on every input runs light::ScenePipeline, the object nodes/scene_light runs (one
+// per input stream and variant: clean = a given G-buffer, sensor = the node's depth mode, fused =
+// its gbuffer mode on fusion's G_r with the frame's depth image), so what is measured is what
+// ships; the flags below are ScenePipelineOptions (docs/light.md "Scene pipeline").
 //
 //   scene_light_eval [--sim SCENARIO.yaml | --log FILE.mcap] --json OUT [--plots DIR]
 //                    [--frames N] [--directions N] [--bands B] [--aux] [--threads T]
@@ -33,8 +37,9 @@
 // (::albedo_invariant);
 // --quadrature: eq. 6 as printed (no analytic unoccluded transfer) — ablations. Timings are per
 // frame at the stream's resolution with --threads workers (default 2): wall ms, process CPU ms of
-// the transfer (all threads) and thread CPU ms of the estimate. Output: one JSON object; plots as
-// PNG (lat-long maps, error over time, estimated and true direction over time).
+// the transfer (all threads) and thread CPU ms of the estimate (the fit, the point fit and the
+// shadow search: ScenePipelineTimings). Output: one JSON object; plots as PNG (lat-long maps,
+// error over time, estimated and true direction over time).
 //
 // Real-like input (--sim): `geometry_vs_clean` (coverage of the rendered surface, normal error
 // against the rendered normals) for the sensor and fused G-buffers. --fused also runs every
@@ -56,29 +61,30 @@
 // --point-rows N (rows of the point fit, PointLightOptions::max_rows); adds
 // per series `point_chosen_frames`, `point_screened_out_frames` / `point_warm_frames`
 // (PointLightEstimate::screened_out / warm_started; --no-screen: PointLightOptions::screen_rows 0,
-// --cold: no PointLightTracker, every frame starts cold; --screen-rows N, --screen-lm N,
-// --warm-lm N set PointLightOptions::screen_rows / screen_lm_iterations / warm_lm_iterations),
-// `cpu_ms_point_median` (the point fit's thread CPU time: EstimateSceneLight minus
-// EstimateLight) and `lamp_position_error_m_median` (the chosen model's strongest lamp to the
+// --cold: ScenePipelineOptions::point_warm_start false, every frame starts cold; --screen-rows
+// N, --screen-lm N, --warm-lm N set PointLightOptions::screen_rows / screen_lm_iterations /
+// warm_lm_iterations), `cpu_ms_point_median` (the point fit's thread CPU time, SceneLightResult::
+// point_thread_cpu_ms) and `lamp_position_error_m_median` (the chosen model's strongest lamp to the
 // nearest enabled true lamp, --sim; point frames only); --plots adds scene_light_lamps.png.
 // The sensor path's normals are the node's depth mode's (light::DepthGeometry,
 // kAuto); --legacy-normals / --edge-normals force round 2's / the edge-aware ones
 // (--edge-noise-quad,
 // --edge-threshold, --edge-radius, --edge-view: light::DepthNormalOptions); --reliability uses
-// the normals' reliability as the estimator's row weights. A noise-free-depth run: a scenario
+// the normals' reliability as the estimator's row weights (ScenePipelineOptions::
+// reliability_weights; sensor and fused inputs; --log runs the sensor pipeline, so the sensor
+// flags apply to it). A noise-free-depth run: a scenario
 // without its `sensor:` block (the "sensor" path then sees millimetre depth16 without noise).
 // --fused-shadows raw|gr: the fused input's shadow search on the frame's own depth image with
-// the raw-depth options (raw, the node's shadow_depth default) or on G_r.
+// the raw-depth options (raw, the node's shadow_depth default) or on G_r
+// (ScenePipelineOptions::shadow_geometry).
 // Cast shadows (round 4, on by default for the full variant, --fast-shadows for OursFast too;
 // --no-shadows: off) refine the distant light's direction
-// (light::RefineLightWithShadows; EstimateSceneLight's when the distant model is chosen, timed
+// (light::RefineLightWithShadows in the pipeline when the distant model is used, timed
 // apart); not with --temporal. Per series `shadow_accepted_frames`, `shadow_dir_error_deg_median`
 // (the search's direction, accepted or not) and `cpu_ms_shadow_median` (process CPU, both
 // threads); per frame the search's figures are printed. Tuning flags: the comment on
 // Options::shadows.
 #include "probeless/node/main.h"
-
-#include <time.h>
 
 #include <algorithm>
 #include <chrono>
@@ -100,6 +106,7 @@
 
 #include "probeless/light/estimate.h"
 #include "probeless/light/messages.h"
+#include "probeless/light/pipeline.h"
 #include "probeless/light/point_light.h"
 #include "probeless/light/reliability.h"
 #include "probeless/light/shadow.h"
@@ -173,7 +180,7 @@ struct Options {
   int lamps = 1;                                             // --lamps K
   int point_rows = 0;        // --point-rows N: PointLightOptions::max_rows (0 = its default)
   bool point_screen = true;  // --no-screen: PointLightOptions::screen_rows = 0
-  bool point_warm = true;    // --cold: no PointLightTracker (every frame starts cold)
+  bool point_warm = true;    // --cold: ScenePipelineOptions::point_warm_start false
   int screen_rows = -1;      // --screen-rows N: PointLightOptions::screen_rows (-1 = default)
   int screen_lm = -1;        // --screen-lm N: PointLightOptions::screen_lm_iterations
   int warm_lm = -1;          // --warm-lm N: PointLightOptions::warm_lm_iterations
@@ -301,41 +308,18 @@ std::string SeriesJson(const Series& s) {
   return o.str();
 }
 
+// One evaluated variant (full = Ours, fast = OursFast): one light::ScenePipeline per input stream,
+// the object the node runs, each with the state of its stream (warm starts, temporal history).
 struct Variant {
-  light::TransferComputer computer;
-  light::EstimateOptions estimate;
-  light::SceneLightOptions scene;  // --light-model: scene.distant = estimate
-  // The shadow options of the sensor-depth input (--shadow-cues); scene.shadow's for the others.
-  light::ShadowOptions shadow_depth;
-  light::TransferResult result;  // reused across frames, as the node does
+  std::optional<light::ScenePipeline> clean_pipeline, sensor_pipeline, fused_pipeline;
+  // --mix: the hybrids of clean and sensor inputs, as given G-buffers without state (no warm
+  // start, no temporal history).
+  std::optional<light::ScenePipeline> mix_pipeline;
   Series clean, noisy, fused;
   std::array<Series, 7> mix;  // --mix: clean geometry + sensor colour; sensor geometry + clean
                               // colour; clean normals and depth where the sensor has depth;
                               // sensor depth + clean normals; clean depth + sensor normals
-  // --temporal: one accumulator per input (clean, sensor, fused), fed with the frames before each
-  // evaluated one.
-  std::array<light::TemporalLightEstimator, 3> temporal;
-  // Warm starts of the point fit, one per input stream (clean, sensor, fused); not for --mix.
-  std::array<light::PointLightTracker, 3> trackers;
-  Variant(const light::TransferOptions& o, const light::EstimateOptions& e,
-          const light::TemporalOptions& t)
-      : computer(o),
-        estimate(e),
-        temporal{light::TemporalLightEstimator(t), light::TemporalLightEstimator(t),
-                 light::TemporalLightEstimator(t)} {}
 };
-
-double CpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-double ThreadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 // Geometry error of a G-buffer against the noise-free render of the same frame: the share of the
 // rendered surface pixels it covers, the median and p90 angle between its normals and the rendered
@@ -366,56 +350,76 @@ GeometryError CompareGeometry(const light::GeometryView& g, const light::Geometr
   return e;
 }
 
-// Runs one variant on one frame and scores it against the ground truth.
-Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float> grey,
-                std::span<const uint8_t> colour, const light::AuxiliaryBuffers& aux,
-                const msgs::ShLight& truth, double time_s,
-                const msgs::ShLight* camera_truth = nullptr,
-                light::TemporalLightEstimator* temporal = nullptr, const float* rotation = nullptr,
-                const std::vector<std::array<float, 3>>* true_lamps = nullptr,
-                std::span<const float> reliability = {},
-                light::PointLightTracker* tracker = nullptr,
-                const light::GeometryView* shadow_geometry = nullptr) {
-  // The shadow search's geometry: `g` unless given (--fused-shadows raw: the frame's own depth).
-  const light::GeometryView& sg = shadow_geometry != nullptr ? *shadow_geometry : g;
+// The pipeline's input for a G-buffer (`g`: depth, normals, colour, and the image's grey and
+// colour), stamp = the frame index.
+light::SceneFrame GBufferFrame(const light::GeometryStorage& g, int64_t stamp,
+                               const light::AuxiliaryBuffers* aux) {
+  light::SceneFrame f;
+  f.stamp_ns = stamp;
+  f.width = g.width;
+  f.height = g.height;
+  f.intrinsics = g.intrinsics;
+  f.grey = g.grey;
+  f.colour = g.colour;
+  f.gbuffer_depth = g.depth;
+  f.gbuffer_normals = g.normals;
+  f.gbuffer_colour = g.colour;
+  f.aux = aux;
+  return f;
+}
+
+// The sensor's images of a simulated frame as a camera delivers them: the depth16 in metres, the
+// noisy rgb8 and its linear grey (the inputs of the node's depth mode).
+struct SensorImages {
+  int width = 0, height = 0;
+  light::Intrinsics intrinsics;
+  std::vector<float> depth;
+  std::vector<uint8_t> colour;
+  std::vector<float> grey;
+};
+
+SensorImages SensorImagesOf(const sim::SimFrame& frame) {
+  SensorImages s;
+  s.width = frame.render.width;
+  s.height = frame.render.height;
+  s.intrinsics = {frame.camera.fx, frame.camera.fy, frame.camera.cx, frame.camera.cy};
+  s.depth.resize(static_cast<size_t>(s.width) * s.height);
+  for (size_t i = 0; i < s.depth.size(); ++i) s.depth[i] = frame.depth_mm[i] * 0.001f;
+  s.colour = frame.rgb;
+  light::SrgbToLinearGrey(s.colour, &s.grey);
+  return s;
+}
+
+light::SceneFrame DepthFrame(const SensorImages& s, int64_t stamp,
+                             const light::AuxiliaryBuffers* aux) {
+  light::SceneFrame f;
+  f.stamp_ns = stamp;
+  f.width = s.width;
+  f.height = s.height;
+  f.intrinsics = s.intrinsics;
+  f.grey = s.grey;
+  f.colour = s.colour;
+  f.depth_image = s.depth;
+  f.aux = aux;
+  return f;
+}
+
+// Scores one pipeline result (of the frame `in`) against the ground truth.
+Sample Score(const light::ScenePipeline& p, const light::ScenePipelineResult& r,
+             const light::SceneFrame& in, const msgs::ShLight& truth, double time_s,
+             const msgs::ShLight* camera_truth = nullptr,
+             const std::vector<std::array<float, 3>>* true_lamps = nullptr) {
   Sample s;
   s.time_s = time_s;
-  light::TransferResult& t = v.result;
-  const double c0 = CpuMs();
-  const auto t0 = Clock::now();
-  v.computer.Compute(g, aux, nullptr, &t);
-  auto t1 = Clock::now();
-  s.cpu_ms_transfer = CpuMs() - c0;
-  const double c1 = ThreadCpuMs();
-  light::LightEstimate e;
-  light::ShadowEstimate shadow;
-  if (temporal != nullptr) {
-    e = temporal->Estimate(t, grey, v.estimate, colour, rotation, reliability);
-  } else if (v.scene.model == light::LightModel::kDistant) {
-    e = light::EstimateLight(t, grey, v.estimate, colour, reliability);
-    if (v.scene.shadow.enabled && e.valid) {
-      const double c_shadow = CpuMs();
-      shadow = light::RefineLightWithShadows(sg, grey, v.scene.shadow, colour, &e);
-      s.cpu_ms_shadow = CpuMs() - c_shadow;
-    }
-  } else {
-    light::EstimateLight(t, grey, v.estimate, colour);  // timed alone for cpu_ms_point
-    const double c_distant = ThreadCpuMs() - c1;
-    const double c2 = ThreadCpuMs();
-    // The shadow refinement is EstimateSceneLight's (the distant model chosen), timed apart.
-    light::SceneLightOptions scene = v.scene;
-    scene.shadow.enabled = false;
-    t1 = Clock::now();  // the wall time, like the CPU time, is EstimateSceneLight's alone
-    const light::SceneLightResult r = light::EstimateSceneLight(g, t, grey, scene, colour, tracker);
-    const double c_scene = ThreadCpuMs() - c2;
-    s.cpu_ms_point = std::max(0.0, c_scene - c_distant);
-    s.cpu_ms_estimate = c_scene;  // EstimateSceneLight alone (it runs EstimateLight itself)
-    e = r.light;
-    if (v.scene.shadow.enabled && r.used == light::LightModel::kDistant && e.valid) {
-      const double c_shadow = CpuMs();
-      shadow = light::RefineLightWithShadows(sg, grey, v.scene.shadow, colour, &e);
-      s.cpu_ms_shadow = CpuMs() - c_shadow;
-    }
+  s.ms_transfer = r.timings.ms_transfer;
+  s.cpu_ms_transfer = r.timings.cpu_ms_transfer;
+  s.ms_estimate = r.timings.ms_estimate;
+  s.cpu_ms_estimate = r.timings.cpu_ms_estimate;
+  s.cpu_ms_point = r.timings.cpu_ms_point;
+  s.cpu_ms_shadow = r.timings.cpu_ms_shadow;
+  const light::LightEstimate& e = r.light;
+  if (p.options().light_model != light::LightModel::kDistant) {
+    // The point path ran (EstimateSceneLight): its model-selection figures.
     s.point_chosen = r.used == light::LightModel::kPoint;
     if (r.point.median_residual_distant > 0) {
       s.point_gain = 1 - r.point.median_residual_point / r.point.median_residual_distant;
@@ -436,10 +440,6 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
       }
     }
   }
-  if (std::isnan(s.cpu_ms_point)) s.cpu_ms_estimate = ThreadCpuMs() - c1;
-  const auto t2 = Clock::now();
-  s.ms_transfer = std::chrono::duration<double, std::milli>(t1 - t0).count();
-  s.ms_estimate = std::chrono::duration<double, std::milli>(t2 - t1).count();
   s.estimate = e.coefficients;
   for (int n = 0; n < 9; ++n) {
     for (int c = 0; c < 3; ++c) s.truth[n * 3 + c] = truth.coefficients[n][c];
@@ -451,7 +451,11 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
   };
   s.dir_error_deg = angle(truth.dominant_direction);
-  if (v.scene.shadow.enabled && shadow.evaluations > 0) {
+  if (r.shadow_ran) {
+    // On the search's own geometry and options (the raw depth with --fused-shadows raw).
+    const light::ShadowEstimate& shadow = r.shadow;
+    const light::GeometryView& sg = r.shadow_geometry;
+    const light::ShadowOptions& so = r.shadow_options;
     const float* d = truth.dominant_direction;
     if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
       const double dot =
@@ -464,15 +468,13 @@ Sample RunFrame(Variant& v, const light::GeometryView& g, std::span<const float>
     s.shadow_contrast = shadow.contrast;
     s.shadow_runner_up = shadow.runner_up;
     if (d[0] != 0 || d[1] != 0 || d[2] != 0) {
-      // On the search's own geometry (sg: the raw depth with --fused-shadows raw).
-      s.shadow_truth_score =
-          light::ShadowScore(sg, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+      s.shadow_truth_score = light::ShadowScore(sg, in.grey, so, in.colour, {d[0], d[1], d[2]});
       s.shadow_truth_mask =
-          light::ShadowMaskAgreement(sg, grey, v.scene.shadow, colour, {d[0], d[1], d[2]});
+          light::ShadowMaskAgreement(sg, in.grey, so, in.colour, {d[0], d[1], d[2]});
     }
     const light::Vec3f& sd = shadow.direction;
     if (sd[0] != 0 || sd[1] != 0 || sd[2] != 0) {
-      s.shadow_mask = light::ShadowMaskAgreement(sg, grey, v.scene.shadow, colour, sd);
+      s.shadow_mask = light::ShadowMaskAgreement(sg, in.grey, so, in.colour, sd);
     }
   }
   for (int k = 0; k < 3; ++k) {
@@ -872,45 +874,81 @@ int Run(int argc, char** argv) {
     if (o.light_model_set) throw node::UsageError("--reliability needs --light-model distant");
     o.light_model = light::LightModel::kDistant;  // the row weights are EstimateLight's
   }
-  light::TransferOptions full_o;
-  full_o.directions = o.directions;
-  full_o.bands = o.bands;
-  full_o.threads = o.threads;
-  full_o.seed = o.seed;
-  full_o.analytic_unoccluded = !o.quadrature;
-  light::TransferOptions fast_o = full_o;
-  fast_o.subsample = 4;
   light::EstimateOptions eo;
   if (o.grey_world) eo.albedo_groups = 0;
   eo.albedo_invariant = o.invariant_albedo;
   if (o.albedo_groups >= 0) eo.albedo_groups = o.albedo_groups;
   if (o.no_balance) eo.balance_normals = false;
-  light::TemporalOptions to;
-  to.frames = o.temporal;
-  to.forgetting = o.forgetting;
-  Variant full(full_o, eo, to), fast(fast_o, eo, to);
+  light::DepthGeometryOptions dgo = o.depth_geometry;
+  dgo.smooth_radius = o.smooth_radius;
+  dgo.step = o.normal_step;
+  // Every variant and input runs light::ScenePipeline, the node's object; what differs between
+  // them are options the node has too (docs/light.md "Scene pipeline").
+  light::ScenePipelineOptions base;
+  base.transfer.directions = o.directions;
+  base.transfer.bands = o.bands;
+  base.transfer.threads = o.threads;
+  base.transfer.seed = o.seed;
+  base.transfer.analytic_unoccluded = !o.quadrature;
+  base.estimate = eo;
+  base.depth_geometry = dgo;
+  base.filter = o.filter;
+  base.temporal.frames = o.temporal;
+  base.temporal.forgetting = o.forgetting;
+  base.light_model = o.light_model;
+  base.point.max_lamps = o.lamps;
+  if (o.point_rows > 0) base.point.max_rows = o.point_rows;
+  if (o.screen_rows >= 0) base.point.screen_rows = o.screen_rows;
+  if (o.screen_lm > 0) base.point.screen_lm_iterations = o.screen_lm;
+  if (o.warm_lm > 0) base.point.warm_lm_iterations = o.warm_lm;
+  if (!o.point_screen) base.point.screen_rows = 0;
+  base.point_warm_start = o.point_warm;
+  base.shadow = o.shadow;
+  base.shadow.threads = o.threads;
+  // --shadow-cues: `all` also on G-buffers (the clean render, fused G_r), `none` not even on depth.
+  base.shadow.image_cues = o.shadow_cues == "all";
+  base.depth_image_cues = o.shadow_cues != "none";
+  Variant full, fast;
   for (Variant* v : {&full, &fast}) {
-    v->scene.model = o.light_model;
-    v->scene.distant = eo;
-    v->scene.point.max_lamps = o.lamps;
-    v->scene.shadow = o.shadow;
+    light::ScenePipelineOptions vo = base;
+    if (v == &fast) vo.transfer.subsample = 4;
     // OursFast keeps its 15 ms budget: shadows only with --fast-shadows (as the node's default).
-    v->scene.shadow.enabled = o.shadows && (v == &full || o.fast_shadows);
-    v->scene.shadow.image_cues = o.shadow_cues == "all";
-    v->shadow_depth = v->scene.shadow;
-    v->shadow_depth.image_cues = o.shadow_cues != "none";
-    if (o.point_rows > 0) v->scene.point.max_rows = o.point_rows;
-    if (o.screen_rows >= 0) v->scene.point.screen_rows = o.screen_rows;
-    if (o.screen_lm > 0) v->scene.point.screen_lm_iterations = o.screen_lm;
-    if (o.warm_lm > 0) v->scene.point.warm_lm_iterations = o.warm_lm;
-    if (!o.point_screen) v->scene.point.screen_rows = 0;
-    if (o.grey_world) v->scene.point.albedo_groups = 0;
-    v->scene.point.albedo_invariant = o.invariant_albedo;
-    if (o.albedo_groups >= 0) v->scene.point.albedo_groups = o.albedo_groups;
+    vo.shadow.enabled = o.shadows && (v == &full || o.fast_shadows);
+    // Clean: the rendered G-buffer as it is (its normals exact; no filter, no reliability).
+    light::ScenePipelineOptions clean = vo;
+    clean.shadow_geometry = light::ShadowGeometry::kGeometryBuffer;
+    v->clean_pipeline.emplace(clean);
+    // Sensor: the node's depth mode on the sensor's depth image.
+    light::ScenePipelineOptions sensor = vo;
+    sensor.source = light::SceneGeometrySource::kDepthImage;
+    sensor.normal_filter = o.normal_filter;
+    sensor.reliability_weights = o.reliability;
+    v->sensor_pipeline.emplace(sensor);
+    // Fused: the node's gbuffer mode on fusion's G_r (--fused-normal-step: normals recomputed
+    // from its depth, edge-aware unless --legacy-normals), the shadow search on the frame's own
+    // depth image (--fused-shadows raw, the node's shadow_depth default) or on G_r.
+    light::ScenePipelineOptions fused = vo;
+    if (o.fused_normal_step > 0) {
+      fused.gbuffer_normals = o.depth_geometry.normals_from != light::DepthNormals::kCentral
+                                  ? light::GBufferNormals::kEdge
+                                  : light::GBufferNormals::kCentral;
+      fused.gbuffer_normal_step = o.fused_normal_step;
+      fused.gbuffer_smooth_radius = std::max(0, o.smooth_radius);
+    }
+    fused.normal_filter = o.normal_filter;
+    fused.reliability_weights = o.reliability;
+    fused.shadow_geometry = o.fused_shadows_raw ? light::ShadowGeometry::kDepthImage
+                                                : light::ShadowGeometry::kGeometryBuffer;
+    v->fused_pipeline.emplace(fused);
+    // --mix: given G-buffers, no state carried between them.
+    light::ScenePipelineOptions mix = clean;
+    mix.temporal.frames = 1;
+    mix.point_warm_start = false;
+    v->mix_pipeline.emplace(mix);
   }
   std::vector<GeometryError> sensor_geometry, fused_geometry;  // per evaluated frame (--sim)
   std::vector<double> fused_aux_ms;    // --aux --fused: wall ms of the 3 orthographic raycasts
-  std::vector<double> measured_noise;  // DepthGeometry's measured noise k per sensor frame
+  std::vector<double> measured_noise;  // DepthGeometry's measured noise k per evaluated frame
   const auto start = Clock::now();
   std::string source_name;
   if (o.log.empty()) {
@@ -979,23 +1017,25 @@ int Run(int argc, char** argv) {
                      static_cast<unsigned long long>(f.index), last_fusion.icp.failure.c_str());
       }
     };
-    light::DepthGeometryOptions dgo = o.depth_geometry;
-    dgo.smooth_radius = o.smooth_radius;
-    dgo.step = o.normal_step;
+    // Mix inputs only (--mix): the sensor's G-buffer as the node's depth mode makes it.
     auto sensor_geometry_of = [&](const sim::SimFrame& frame) {
-      float noise = 0;
-      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true, dgo, &noise);
-      measured_noise.push_back(noise);
+      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true, dgo);
       if (o.normal_filter) {
         light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
       }
-      if (!o.reliability) g.reliability.clear();
+      g.reliability.clear();
       return g;
     };
     // G_r of the last integrated frame as scene_light receives it in gbuffer mode: the merged
-    // depth and its normals, with the camera image's grey and colour.
-    auto fused_geometry_of = [&](const sim::SimFrame& frame) {
-      light::GeometryStorage g = light::GeometryFromSimFrame(frame, true);
+    // depth and its normals (or G_v with --fused-volume), with the camera image's grey and
+    // colour; the pipeline recomputes, filters and weighs its normals as the node does.
+    auto fused_input_of = [&](const SensorImages& sensor) {
+      light::GeometryStorage g;
+      g.width = sensor.width;
+      g.height = sensor.height;
+      g.intrinsics = sensor.intrinsics;
+      g.colour = sensor.colour;
+      g.grey = sensor.grey;
       const auto& d = fusion->merged().denoised;
       const auto& n = fusion->merged_normals();
       g.depth.assign(d.data.begin(), d.data.end());
@@ -1023,69 +1063,49 @@ int Run(int argc, char** argv) {
           }
         }
       }
-      if (o.fused_normal_step > 0) {
-        if (o.smooth_radius > 0) light::SmoothDepth(g.depth, g.width, g.height, o.smooth_radius);
-        if (o.depth_geometry.normals_from != light::DepthNormals::kCentral) {
-          light::DepthNormalOptions no = o.depth_geometry.normals;
-          no.step = o.fused_normal_step;
-          if (no.noise_quadratic < 0) no.noise_quadratic = dgo.smoothed_noise_quadratic;
-          light::NormalsWithReliability(g.depth, g.width, g.height, g.intrinsics, no, &g.normals,
-                                        &g.reliability);
-        } else {
-          light::NormalsFromDepth(g.depth, g.width, g.height, g.intrinsics, &g.normals, 0.05f,
-                                  o.fused_normal_step);
-        }
-      }
-      if (o.normal_filter) {
-        light::FilterNormals(g.depth, g.width, g.height, g.intrinsics, o.filter, g.normals);
-      }
-      if (o.reliability && g.reliability.empty()) {
-        light::NormalReliabilityOptions ro;
-        ro.noise_quadratic = dgo.smoothed_noise_quadratic;
-        light::NormalReliability(g.depth, g.width, g.height, g.intrinsics, g.normals, ro,
-                                 &g.reliability);
-      }
-      if (!o.reliability) g.reliability.clear();
       return g;
     };
-    // --temporal: the camera rotation from the previous fed frame (d_now = R d_prev); a frame
-    // that does not follow the previous one resets the accumulators.
-    int64_t last_fed = -2;
-    raytrace::Mat3 last_c2w;
-    float rotation[9];
-    auto advance = [&](const sim::SimFrame& frame) -> const float* {
+    auto pose_of = [](const sim::SimFrame& frame) {
       const raytrace::Mat3& r = frame.camera.camera_to_world.rotation;
-      const bool follows = static_cast<int64_t>(frame.index) == last_fed + 1;
-      if (!follows) {
-        for (Variant* v : {&full, &fast}) {
-          for (auto& t : v->temporal) t.Reset();
-        }
-      }
+      std::array<double, 9> m;
       for (int a = 0; a < 3; ++a) {
-        for (int b = 0; b < 3; ++b) {
-          double x = 0;
-          for (int c = 0; c < 3; ++c) x += r.m[c][a] * last_c2w.m[c][b];  // R_now^T R_prev
-          rotation[a * 3 + b] = static_cast<float>(x);
+        for (int b = 0; b < 3; ++b) m[a * 3 + b] = r.m[a][b];
+      }
+      return m;
+    };
+    // --temporal: a frame that does not follow the previous one starts the accumulators afresh
+    // (the pipelines rotate the history by the simulator's camera rotation between frames).
+    int64_t last_fed = -2;
+    auto advance = [&](const sim::SimFrame& frame) {
+      if (static_cast<int64_t>(frame.index) != last_fed + 1) {
+        for (Variant* v : {&full, &fast}) {
+          v->clean_pipeline->Reset();
+          v->sensor_pipeline->Reset();
+          v->fused_pipeline->Reset();
         }
       }
       last_fed = static_cast<int64_t>(frame.index);
-      last_c2w = r;
-      return follows ? rotation : nullptr;
     };
-    // Feeds a frame before an evaluated one to the accumulators (not scored).
+    // Feeds a frame before an evaluated one to the accumulators (not scored; no auxiliary views).
     auto feed = [&](const sim::SimFrame& frame) {
-      const float* rot = advance(frame);
+      advance(frame);
+      const int64_t stamp = static_cast<int64_t>(frame.index);
       const light::GeometryStorage clean = light::GeometryFromSimFrame(frame, false);
-      const light::GeometryStorage sensor = sensor_geometry_of(frame);
+      const SensorImages sensor = SensorImagesOf(frame);
       std::optional<light::GeometryStorage> fused;
-      if (fusion) fused = fused_geometry_of(frame);
+      if (fusion) fused = fused_input_of(sensor);
       for (Variant* v : {&full, &fast}) {
-        const light::GeometryStorage* inputs[3] = {&clean, &sensor, fused ? &*fused : nullptr};
-        for (int j = 0; j < 3; ++j) {
-          if (inputs[j] == nullptr) continue;
-          v->computer.Compute(inputs[j]->View(), {}, nullptr, &v->result);
-          v->temporal[j].Estimate(v->result, inputs[j]->grey, v->estimate, inputs[j]->colour, rot,
-                                  inputs[j]->reliability);
+        light::SceneFrame in = GBufferFrame(clean, stamp, nullptr);
+        in.camera_to_world_rotation = pose_of(frame);
+        v->clean_pipeline->Process(in);
+        in = DepthFrame(sensor, stamp, nullptr);
+        in.camera_to_world_rotation = pose_of(frame);
+        v->sensor_pipeline->Process(in);
+        if (fused) {
+          in = GBufferFrame(*fused, stamp, nullptr);
+          in.depth_image = sensor.depth;
+          in.camera_to_world_rotation = pose_of(frame);
+          v->fused_pipeline->Process(in);
         }
       }
     };
@@ -1105,11 +1125,8 @@ int Run(int argc, char** argv) {
         for (uint64_t j = first; j < index; ++j) feed(simulator.Render(j));
       }
       const sim::SimFrame f = simulator.Render(index);
-      const float* rot = o.temporal > 1 ? advance(f) : nullptr;
-      auto tracker_of = [&](Variant* v, int j) { return o.point_warm ? &v->trackers[j] : nullptr; };
-      auto temporal_of = [&](Variant* v, int j) {
-        return o.temporal > 1 ? &v->temporal[j] : nullptr;
-      };
+      if (o.temporal > 1) advance(f);
+      const int64_t stamp = static_cast<int64_t>(index);
       if (fusion) {
         integrate(f);
         if (last_fusion.state == recon::TrackingState::kLost) ++fused_lost;
@@ -1198,28 +1215,34 @@ int Run(int argc, char** argv) {
         const light::GeometryStorage* ms[7] = {&m0, &m1, &m2, &m3, &m4, &m5, &m6};
         for (int j = 0; j < 7; ++j) {
           for (Variant* v : {&full, &fast}) {
-            v->mix[j].samples.push_back(RunFrame(*v, ms[j]->View(), ms[j]->grey, ms[j]->colour,
-                                                 aux.buffers, truth, f.time_s, &camera_truth));
+            const light::SceneFrame in = GBufferFrame(*ms[j], stamp, &aux.buffers);
+            v->mix[j].samples.push_back(Score(*v->mix_pipeline, v->mix_pipeline->Process(in), in,
+                                              truth, f.time_s, &camera_truth));
           }
         }
       }
-      for (bool sensor : {false, true}) {
-        const light::GeometryStorage g = sensor ? sensor_geometry_of(f) : clean_g;
-        if (sensor) sensor_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
-        for (Variant* v : {&full, &fast}) {
-          const light::ShadowOptions shadow = v->scene.shadow;
-          if (sensor) v->scene.shadow = v->shadow_depth;
-          (sensor ? v->noisy : v->clean)
-              .samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, aux.buffers, truth,
-                                          f.time_s, &camera_truth, temporal_of(v, sensor ? 1 : 0),
-                                          rot, &true_lamps, g.reliability,
-                                          tracker_of(v, sensor ? 1 : 0)));
-          v->scene.shadow = shadow;
+      const SensorImages sensor = SensorImagesOf(f);
+      for (Variant* v : {&full, &fast}) {
+        light::SceneFrame in = GBufferFrame(clean_g, stamp, &aux.buffers);
+        in.camera_to_world_rotation = pose_of(f);
+        v->clean.samples.push_back(Score(*v->clean_pipeline, v->clean_pipeline->Process(in), in,
+                                         truth, f.time_s, &camera_truth, &true_lamps));
+      }
+      for (Variant* v : {&full, &fast}) {
+        light::SceneFrame in = DepthFrame(sensor, stamp, &aux.buffers);
+        in.camera_to_world_rotation = pose_of(f);
+        const light::ScenePipelineResult& r = v->sensor_pipeline->Process(in);
+        v->noisy.samples.push_back(
+            Score(*v->sensor_pipeline, r, in, truth, f.time_s, &camera_truth, &true_lamps));
+        if (v == &full) {
+          // The G-buffer the node's depth mode made of the sensor depth (both variants make the
+          // same).
+          sensor_geometry.push_back(CompareGeometry(r.geometry, clean_g.View()));
+          measured_noise.push_back(r.measured_noise_quadratic);
         }
       }
       if (fusion) {
-        const light::GeometryStorage g = fused_geometry_of(f);
-        fused_geometry.push_back(CompareGeometry(g.View(), clean_g.View()));
+        const light::GeometryStorage g = fused_input_of(sensor);
         // --aux: the reconstruction's own views, through the bus message (fusion publish_aux ->
         // scene_light use_aux); none for a lost frame, as in the node.
         light::AuxiliaryBuffers fused_aux;
@@ -1237,19 +1260,16 @@ int Run(int argc, char** argv) {
           recon::WriteAuxiliaryViews(last_fusion.camera_to_world, views, *m, m.payload);
           fused_aux = light::AuxiliaryFromMessage(*m, m.payload);
         }
-        // --fused-shadows raw: the shadow search on the frame's own depth (aligned with the image,
-        // with the raw-depth options) while the transfer and the fit use G_r.
-        std::optional<light::GeometryStorage> raw;
-        if (o.fused_shadows_raw) raw = light::GeometryFromSimFrame(f, true, dgo);
-        const light::GeometryView raw_view = raw ? raw->View() : light::GeometryView{};
         for (Variant* v : {&full, &fast}) {
-          const light::ShadowOptions shadow = v->scene.shadow;
-          if (raw) v->scene.shadow = v->shadow_depth;
-          v->fused.samples.push_back(RunFrame(*v, g.View(), g.grey, g.colour, fused_aux, truth,
-                                              f.time_s, &camera_truth, temporal_of(v, 2), rot,
-                                              nullptr, g.reliability, tracker_of(v, 2),
-                                              raw ? &raw_view : nullptr));
-          v->scene.shadow = shadow;
+          // The frame's own depth image goes along as in the node (camera/depth with the G_r's
+          // stamp): the shadow search runs on it with --fused-shadows raw.
+          light::SceneFrame in = GBufferFrame(g, stamp, &fused_aux);
+          in.depth_image = sensor.depth;
+          in.camera_to_world_rotation = pose_of(f);
+          const light::ScenePipelineResult& r = v->fused_pipeline->Process(in);
+          v->fused.samples.push_back(
+              Score(*v->fused_pipeline, r, in, truth, f.time_s, &camera_truth));
+          if (v == &full) fused_geometry.push_back(CompareGeometry(r.geometry, clean_g.View()));
         }
       }
       std::fprintf(stderr, "frame %llu (%d/%d): full %.1f deg, fast %.1f deg; sensor %.1f / %.1f",
@@ -1328,7 +1348,7 @@ int Run(int argc, char** argv) {
     auto source = replay::OpenMcapSource(o.log);
     std::map<int64_t, msgs::ShLight> truths;
     struct Pending {
-      std::vector<float> depth, normals, grey;
+      std::vector<float> depth;  // metres (light::DepthFromImage), the pipeline's depth image
       light::Intrinsics k;
       int w = 0, h = 0;
       double time_s = 0;
@@ -1349,7 +1369,7 @@ int Run(int argc, char** argv) {
       } else if (topic.topic == "/camera/depth" && info) {
         const auto d = msgs::ReadMessage<msgs::Image>(bytes);
         Pending p;
-        light::GeometryFromDepthImage(*d, d.payload, *info, &p.depth, &p.normals);
+        light::DepthFromImage(*d, d.payload, *info, &p.depth);
         p.k = light::IntrinsicsFrom(*info, d->width, d->height);
         p.w = d->width;
         p.h = d->height;
@@ -1368,12 +1388,18 @@ int Run(int argc, char** argv) {
     for (int k = 0; k < count; ++k) {
       const int64_t seq = usable[static_cast<size_t>(k) * usable.size() / count];
       const Pending& p = frames[seq];
-      const light::GeometryView g{p.w, p.h, p.k, p.depth, p.normals, {}};
+      // A log's depth is the sensor's: the node's depth mode (the sensor pipelines).
+      light::SceneFrame in;
+      in.stamp_ns = seq;
+      in.width = p.w;
+      in.height = p.h;
+      in.intrinsics = p.k;
+      in.grey = greys[seq];
+      in.colour = colours[seq];
+      in.depth_image = p.depth;
       for (Variant* v : {&full, &fast}) {
-        v->scene.shadow = v->shadow_depth;  // a log's depth is the sensor's
-        v->noisy.samples.push_back(RunFrame(*v, g, greys[seq], colours[seq], {}, truths[seq],
-                                            p.time_s, nullptr, nullptr, nullptr, nullptr, {},
-                                            o.point_warm ? &v->trackers[1] : nullptr));
+        v->noisy.samples.push_back(
+            Score(*v->sensor_pipeline, v->sensor_pipeline->Process(in), in, truths[seq], p.time_s));
       }
     }
     // A log carries sensor data only: report it as both the top level and with_sensor_noise.
