@@ -31,6 +31,8 @@
 #include "probeless/dataset/source.h"
 #include "probeless/eval/metrics.h"
 #include "probeless/eval/scene_folder.h"
+#include "probeless/msgs/image.h"
+#include "probeless/rectify/rectify.h"
 #include "scene_prep.h"
 
 namespace {
@@ -128,7 +130,10 @@ Scene LoadScene(const fs::path& dir) {
   return s;
 }
 
-cv::Mat ReadRgb(const std::string& path, int w, int h) {
+cv::Mat AsRectified(const cv::Mat& image, const rectify::Rectifier* rectifier);
+
+cv::Mat ReadRgb(const std::string& path, int w, int h,
+                const rectify::Rectifier* rectifier = nullptr) {
   cv::Mat bgr = cv::imread(path, cv::IMREAD_COLOR);
   if (bgr.empty()) throw eval::EvalError(path + ": cannot decode (expected an 8-bit colour image)");
   if (bgr.cols != w || bgr.rows != h) {
@@ -137,17 +142,35 @@ cv::Mat ReadRgb(const std::string& path, int w, int h) {
   }
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  return rgb;
+  return AsRectified(rgb, rectifier);
 }
 
-std::vector<uint8_t> ReadMask(const std::string& path, int w, int h) {
+std::vector<uint8_t> ReadMask(const std::string& path, int w, int h,
+                              const rectify::Rectifier* rectifier = nullptr) {
   cv::Mat m = cv::imread(path, cv::IMREAD_GRAYSCALE);
   if (m.empty()) throw eval::EvalError(path + ": cannot decode (expected an 8-bit mask PNG)");
   if (m.cols != w || m.rows != h) {
     throw eval::EvalError(path + ": " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
                           ", expected " + std::to_string(w) + "x" + std::to_string(h));
   }
+  m = AsRectified(m, rectifier);
   return std::vector<uint8_t>(m.datastart, m.dataend);
+}
+
+// `image` (rgb8 or mono8) as the graph's nodes see it behind the rectify node: resampled by
+// `rectifier` (bilinear, the node's code), unchanged without one.
+cv::Mat AsRectified(const cv::Mat& image, const rectify::Rectifier* rectifier) {
+  if (rectifier == nullptr || rectifier->passthrough()) return image;
+  msgs::Image in;
+  in.Init(static_cast<uint32_t>(image.cols), static_cast<uint32_t>(image.rows),
+          image.channels() == 3 ? msgs::Encoding::kRgb8 : msgs::Encoding::kMono8);
+  in.step = static_cast<uint32_t>(image.step[0]);
+  cv::Mat out(image.rows, image.cols, image.type());
+  msgs::Image out_header;
+  rectifier->Rectify(in, std::as_bytes(std::span(image.datastart, image.dataend)), out_header,
+                     std::as_writable_bytes(std::span(out.data, out.total() * out.elemSize())),
+                     "frame");
+  return out;
 }
 
 eval::LinearImage Linear(const cv::Mat& rgb) {
@@ -331,8 +354,16 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
   const fs::path dir = work / ("scene_" + std::to_string(k));
   fs::create_directories(dir);
   const bool depth_mode = options.mode == "depth";
-  const composite_eval::SceneInfo info = composite_eval::WriteSceneLog(
+  composite_eval::SceneInfo info = composite_eval::WriteSceneLog(
       scene.dir, scene.truth ? &*scene.truth : nullptr, depth_mode, (dir / "scene.mcap").string());
+  // A distorted camera: the graph works behind the rectify node, and so does the comparison.
+  std::optional<rectify::Rectifier> rectifier;
+  if (rectify::HasDistortion(info.camera_info)) {
+    rectifier.emplace(info.camera_info, rectify::RectifyOptions{}, scene.name + " camera_info");
+    std::cerr << tag << ": lens distortion: evaluating in the rectified camera\n";
+  }
+  const rectify::Rectifier* rect = rectifier ? &*rectifier : nullptr;
+  composite_eval::SetCamera(info, rect);
   const composite_eval::Rigid fusion_from_truth =
       composite_eval::FusionWorldFromTruthWorld(info, scene.name);
   std::vector<std::string> object_files;
@@ -361,18 +392,19 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
   graph.log_path = (dir / "launch.log").string();
   graph.timeout_s = 120 + 20.0 * static_cast<double>(scene.frames.size());
   const bool oracle = info.oracle_lights > 0;
-  graph.launch_args = {
-      "source:=" + (dir / "scene.mcap").string(),
-      "mode:=" + options.mode,
-      "depth_topic:=" + std::string(depth_mode ? "/composite_eval/depth" : "/camera/depth"),
-      "objects:=" + FlowList(object_files),
-      "scene_mesh:=" + proxy,
-      std::string("oracle:=") + (oracle ? "true" : "false"),
-      "volume_size:=" + Fixed(volume.size),
-      "volume_origin:=[" + Fixed(volume.origin[0]) + ", " + Fixed(volume.origin[1]) + ", " +
-          Fixed(volume.origin[2]) + "]",
-      "truncation:=" + Fixed(volume.truncation),
-      "depth_max:=" + Fixed(volume.depth_max)};
+  graph.launch_args = {"source:=" + (dir / "scene.mcap").string(),
+                       "mode:=" + options.mode,
+                       std::string("late_depth:=") + (depth_mode ? "true" : "false"),
+                       "depth_topic:=" + std::string(depth_mode ? "/composite_eval/depth_rect"
+                                                                : "/camera/depth_rect"),
+                       "objects:=" + FlowList(object_files),
+                       "scene_mesh:=" + proxy,
+                       std::string("oracle:=") + (oracle ? "true" : "false"),
+                       "volume_size:=" + Fixed(volume.size),
+                       "volume_origin:=[" + Fixed(volume.origin[0]) + ", " +
+                           Fixed(volume.origin[1]) + ", " + Fixed(volume.origin[2]) + "]",
+                       "truncation:=" + Fixed(volume.truncation),
+                       "depth_max:=" + Fixed(volume.depth_max)};
   ::setenv("PROBELESS_LOG_DIR", (dir / "log").string().c_str(), 1);
   std::cerr << tag << ": running the graph (fusion volume " << Fixed(volume.size) << " m)\n";
   const composite_eval::GraphOutput out = composite_eval::RunGraph(graph, [&](size_t done) {
@@ -407,12 +439,12 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
     const eval::RgbEntry& e = scene.frames[f];
     const std::string file = fs::path(e.file).filename().string();
     const int w = info.width, h = info.height;
-    const cv::Mat original_rgb = ReadRgb(scene.dir + "/" + e.file, w, h);
-    const cv::Mat inserted_rgb = ReadRgb(scene.dir + "/rgb_inserted/" + file, w, h);
+    const cv::Mat original_rgb = ReadRgb(scene.dir + "/" + e.file, w, h, rect);
+    const cv::Mat inserted_rgb = ReadRgb(scene.dir + "/rgb_inserted/" + file, w, h, rect);
     const std::vector<uint8_t> mask_object =
-        ReadMask(scene.dir + "/mask_object/" + MaskName(file), w, h);
+        ReadMask(scene.dir + "/mask_object/" + MaskName(file), w, h, rect);
     const std::vector<uint8_t> mask_effect =
-        ReadMask(scene.dir + "/mask_effect/" + MaskName(file), w, h);
+        ReadMask(scene.dir + "/mask_effect/" + MaskName(file), w, h, rect);
     const eval::LinearImage original = Linear(original_rgb), inserted = Linear(inserted_rgb);
     FrameRow row;
     row.timestamp = e.timestamp;
@@ -477,10 +509,10 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
       const eval::RgbEntry& e = scene.frames[c.frame];
       const std::string file = fs::path(e.file).filename().string();
       SheetRow row;
-      row.truth = ReadRgb(scene.dir + "/rgb_inserted/" + file, info.width, info.height);
+      row.truth = ReadRgb(scene.dir + "/rgb_inserted/" + file, info.width, info.height, rect);
       row.crop = CropAround(
-          ReadMask(scene.dir + "/mask_object/" + MaskName(file), info.width, info.height),
-          ReadMask(scene.dir + "/mask_effect/" + MaskName(file), info.width, info.height),
+          ReadMask(scene.dir + "/mask_object/" + MaskName(file), info.width, info.height, rect),
+          ReadMask(scene.dir + "/mask_effect/" + MaskName(file), info.width, info.height, rect),
           info.width, info.height);
       for (int r = 0; r < 3; ++r) {
         const auto it = outputs[r]->find(e.stamp_ns);

@@ -96,10 +96,7 @@ class EvalSource : public dataset::Source {
     if (m.topic_index == info_topic_) {
       const auto c = msgs::ReadMessage<msgs::CameraInfo>(bytes);
       if (info_.width == 0) {
-        info_.fx = c->fx;
-        info_.fy = c->fy;
-        info_.cx = c->cx;
-        info_.cy = c->cy;
+        info_.camera_info = *c;
         info_.width = static_cast<int>(c->width);
         info_.height = static_cast<int>(c->height);
       }
@@ -125,13 +122,11 @@ class EvalSource : public dataset::Source {
       const auto depth = msgs::ReadMessage<msgs::Image>(bytes);
       if (info_.first_depth_stamp < 0 && depth->encoding == msgs::Encoding::kDepth16) {
         info_.first_depth_stamp = depth->header.stamp_ns;
-        info_.first_depth_m.assign(static_cast<size_t>(depth->width) * depth->height, 0.f);
+        info_.first_depth_mm.assign(static_cast<size_t>(depth->width) * depth->height, 0);
         for (uint32_t y = 0; y < depth->height; ++y) {
-          const auto* row = reinterpret_cast<const uint16_t*>(depth.payload.data() +
-                                                              static_cast<size_t>(y) * depth->step);
-          for (uint32_t x = 0; x < depth->width; ++x) {
-            info_.first_depth_m[static_cast<size_t>(y) * depth->width + x] = row[x] * 0.001f;
-          }
+          std::memcpy(info_.first_depth_mm.data() + static_cast<size_t>(y) * depth->width,
+                      depth.payload.data() + static_cast<size_t>(y) * depth->step,
+                      depth->width * sizeof(uint16_t));
         }
       }
       if (late_depth_topic_ != kNone) late_ = CopyBuffer(m.message);
@@ -299,6 +294,25 @@ SceneInfo WriteSceneLog(const std::string& scene_dir, const eval::Truth* truth, 
   options.compression = log::Compression::kNone;  // a temporary file read once: speed over size
   replay::ConvertToMcap(source, mcap_path, options);
   return info;
+}
+
+void SetCamera(SceneInfo& info, const rectify::Rectifier* rectifier) {
+  const msgs::CameraInfo& c = rectifier ? rectifier->rectified_info() : info.camera_info;
+  info.fx = c.fx;
+  info.fy = c.fy;
+  info.cx = c.cx;
+  info.cy = c.cy;
+  std::vector<uint16_t> depth = info.first_depth_mm;
+  if (rectifier != nullptr && !depth.empty()) {
+    msgs::Image in;
+    in.Init(static_cast<uint32_t>(info.width), static_cast<uint32_t>(info.height),
+            msgs::Encoding::kDepth16);
+    msgs::Image out;
+    rectifier->Rectify(in, std::as_bytes(std::span(info.first_depth_mm)), out,
+                       std::as_writable_bytes(std::span(depth)), "first depth image");
+  }
+  info.first_depth_m.resize(depth.size());
+  for (size_t i = 0; i < depth.size(); ++i) info.first_depth_m[i] = depth[i] * 0.001f;
 }
 
 Rigid FusionWorldFromTruthWorld(const SceneInfo& info, const std::string& scene) {

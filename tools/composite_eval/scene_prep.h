@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "probeless/eval/scene_folder.h"
+#include "probeless/msgs/camera_info.h"
+#include "probeless/rectify/rectify.h"
 
 namespace probeless::composite_eval {
 
@@ -34,14 +36,23 @@ struct FrameInfo {
 };
 
 struct SceneInfo {
+  msgs::CameraInfo camera_info;  // the first one the source publishes (as played)
+  // The pinhole camera the graph works in: camera_info's, or the rectified one (SetCamera).
   double fx = 525, fy = 525, cx = 319.5, cy = 239.5;
   int width = 0, height = 0;
   std::vector<FrameInfo> frames;  // in play order
-  // The first depth image (fusion's first frame: its camera frame is fusion's world), metres.
+  // The first depth image (fusion's first frame: its camera frame is fusion's world): as played
+  // (millimetres) and, after SetCamera, in metres in the graph's camera (rectified if need be).
   int64_t first_depth_stamp = -1;
+  std::vector<uint16_t> first_depth_mm;
   std::vector<float> first_depth_m;
   int oracle_lights = 0;  // frames given an oracle light (truth with sh_camera)
 };
+
+// The camera the graph's nodes see behind the rectify node: `rectifier`'s rectified camera (null:
+// camera_info as played, no distortion), and the first depth image in it (nearest resampling, the
+// node's default). Throws rectify::RectifyError on a depth of another size.
+void SetCamera(SceneInfo& info, const rectify::Rectifier* rectifier);
 
 // Writes `mcap_path` from the TUM folder `scene_dir`: every message of the dataset source, and
 // after each frame's own messages (log times +1, +2, +3 ns, the frame's header) a copy of its
