@@ -10,6 +10,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -25,7 +26,7 @@ namespace probeless::light {
 
 // Where a frame's geometry comes from (the node's `mode`).
 enum class SceneGeometrySource {
-  kGeometryBuffer,  // SceneFrame::geometry: a G-buffer with normals (fusion's G_r, a render)
+  kGeometryBuffer,  // SceneFrame::gbuffer_*: a G-buffer with normals (fusion's G_r, a render)
   kDepthImage,      // SceneFrame::depth_image: raw depth, normals by DepthGeometry (no recon)
 };
 
@@ -55,9 +56,9 @@ struct ScenePipelineOptions {
   // fit's (point's own are overwritten: one albedo model for both models).
   EstimateOptions estimate;
 
-  // G-buffer input: its normals, recomputed at `gbuffer_normal_step` pixels (-1 = max(2, width /
-  // 160): the step of the node's `gbuffer_normals: depth`) after SmoothDepth of radius
-  // `gbuffer_smooth_radius` (0 = none; G_r is denoised by the merge).
+  // G-buffer input: its depth first smoothed by SmoothDepth of radius `gbuffer_smooth_radius` (0 =
+  // none: G_r is denoised by the merge), its normals kept or recomputed `gbuffer_normal_step`
+  // pixels apart (-1 = max(2, width / 160): the step of the node's `gbuffer_normals: depth`).
   GBufferNormals gbuffer_normals = GBufferNormals::kGiven;
   int gbuffer_normal_step = -1;
   int gbuffer_smooth_radius = 0;
@@ -97,8 +98,9 @@ struct ScenePipelineOptions {
   bool indirect = false;
 };
 
-// One frame's input. All spans are borrowed for the duration of Process only. Frames: the camera
-// optical frame (x right, y down, z forward) of this frame.
+// One frame's input, borrowed: the pipeline keeps nothing of it after Process (the result's views
+// may point into it). Frames: the camera optical frame (x right, y down, z forward) of this
+// frame.
 struct SceneFrame {
   // Header stamp (ns). A stamp before the previous frame's (a restarted source) resets the state
   // (Reset) before the frame is processed.
@@ -180,6 +182,7 @@ class ScenePipeline {
   ScenePipeline(const ScenePipeline&) = delete;
   ScenePipeline& operator=(const ScenePipeline&) = delete;
 
+  // The options it was made with (validated).
   const ScenePipelineOptions& options() const;
 
   // Runs one frame. Throws LightError("light::ScenePipeline::Process: ...") for an input that
