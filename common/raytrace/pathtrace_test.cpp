@@ -194,9 +194,11 @@ TEST(PathTrace, DirectLightEqualsRender) {
 }
 
 // A white plane below a sphere light (radius R, radiance L, centre at height h): irradiance
-// E = pi L (R / h)^2 at the foot point; a uniform disc sun gives its irradiance exactly.
+// E = pi L (R / h)^2 at the foot point; below a rectangle lamp the form-factor formula; a small
+// uniform disc sun gives its irradiance times the cosine.
 TEST(PathTrace, AreaAndDiscLightsGiveAnalyticIrradiance) {
-  for (const bool sphere : {true, false}) {
+  for (const int kind : {0, 1, 2}) {
+    const bool sphere = kind == 0;
     Scene scene;
     scene.AddObject(MakePlane(50, 50), Diffuse({1, 1, 1}), {}, 1);
     Camera camera = TestCamera(16, 16);
@@ -211,6 +213,18 @@ TEST(PathTrace, AreaAndDiscLightsGiveAnalyticIrradiance) {
       l.radiance = {2, 2, 2};
       scene.area_lights().push_back(l);
       expected = kPi * 2 * (0.3f / 1.5f) * (0.3f / 1.5f) / kPi;
+    } else if (kind == 1) {
+      // Rectangle 2a x 2b at height c, centred above: four corner form factors (Howell C-11).
+      AreaLight l;
+      const float a = 0.4f, b = 0.25f, c = 1.2f;
+      l.centre = {0, c, 0};
+      l.half_u = {a, 0, 0};
+      l.half_v = {0, 0, b};  // u x v = -y: facing the plane
+      l.radiance = {3, 3, 3};
+      scene.area_lights().push_back(l);
+      const float ra = std::sqrt(a * a + c * c), rb = std::sqrt(b * b + c * c);
+      const float f = (a / ra * std::atan(b / ra) + b / rb * std::atan(a / rb)) / (2 * kPi);
+      expected = 3 * 4 * f;
     } else {
       DirectionalLight sun;
       sun.direction = Normalize({0.2f, 1, 0.1f});
@@ -230,7 +244,7 @@ TEST(PathTrace, AreaAndDiscLightsGiveAnalyticIrradiance) {
       pixels.push_back(f.linear_rgb[3 * p]);
     }
     const MeanError s = Stats(pixels);
-    EXPECT_NEAR(s.mean, expected, 0.002 * expected + 4 * s.error) << (sphere ? "sphere" : "disc");
+    EXPECT_NEAR(s.mean, expected, 0.002 * expected + 4 * s.error) << "light kind " << kind;
   }
 }
 
@@ -335,6 +349,24 @@ TEST(PathTrace, DeterministicAndCorrelated) {
   EXPECT_GT(unchanged, static_cast<int>(c.object_ids.size()) / 10);
   options.seed = 8;
   EXPECT_NE(PathTrace(scene, camera, options, &pool).linear_rgb, a.linear_rgb);
+}
+
+TEST(PathTrace, ExposureScalesAndProgressReports) {
+  Scene scene;
+  DirectScene(scene);
+  PathTraceOptions options;
+  options.samples_per_pixel = 2;
+  std::vector<std::pair<int, int>> calls;
+  options.progress = [&](int done, int total) { calls.emplace_back(done, total); };
+  ThreadPool pool(2);
+  const Camera camera = TestCamera();
+  const Frame a = PathTrace(scene, camera, options, &pool);
+  ASSERT_FALSE(calls.empty());
+  EXPECT_EQ(calls.back(), std::make_pair(camera.height, camera.height));
+  for (size_t i = 1; i < calls.size(); ++i) EXPECT_GT(calls[i].first, calls[i - 1].first);
+  options.exposure = 2;
+  const Frame b = PathTrace(scene, camera, options, &pool);
+  for (size_t i = 0; i < a.linear_rgb.size(); ++i) ASSERT_EQ(b.linear_rgb[i], 2 * a.linear_rgb[i]);
 }
 
 TEST(PathTrace, InvalidInputsThrowPreciseErrors) {

@@ -1,20 +1,26 @@
 // raytrace_bench: speed of the ray tracer and the simulator.
 //
 //   raytrace_bench [--scenario FILE.yaml] [--frames N] [--threads N] [--json OUT]
+//                  [--pt-spp N] [--pt-image OUT.ppm] [--no-pt]
 //
 // Rows: (1) whole simulator frames (render + sensor effects + ground truth) of the scenario,
 // default data/scenarios/room_dynamic.yaml at its 640x480 with shadows; (2) the renderer alone on
 // the same frames; (3) batched closest-hit and (4) occlusion queries of random rays through the
-// scene (the PRT-bake API). Prints a table; --json writes the same figures.
+// scene (the PRT-bake API); (5) one path-traced 640x480 frame of the furnished room of
+// pathtrace_room.h (64 paths per pixel, 3 bounces, sun + sky + 2 lamps). Prints a table; --json
+// writes the same figures.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <ctime>
 #include <fstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "pathtrace_room.h"
+#include "probeless/raytrace/pathtrace.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/sim/simulator.h"
 
@@ -32,14 +38,30 @@ struct Row {
   double seconds = 0;
   double frames = 0;  // 0 for ray-only rows
   double rays = 0;
+  double cpu_seconds = -1;  // process CPU time (all threads), when measured
 };
+
+// Process CPU time of all threads: with wall time it shows how much other load slowed a row.
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+// Writes 8-bit sRGB as a binary PPM.
+void WritePpm(const std::string& path, const raytrace::Frame& f) {
+  std::ofstream out(path, std::ios::binary);
+  out << "P6\n" << f.width << " " << f.height << "\n255\n";
+  out.write(reinterpret_cast<const char*>(f.srgb.data()),
+            static_cast<std::streamsize>(f.srgb.size()));
+  if (!out) throw std::runtime_error("cannot write '" + path + "'");
+}
 
 int Run(int argc, char** argv) {
   std::string scenario_path =
       std::string(PROBELESS_SOURCE_DIR) + "/data/scenarios/room_dynamic.yaml";
   int frames = 30;
   int threads = 2;
+  int pt_spp = 64;
+  bool pathtrace = true;
   std::string json;
+  std::string pt_image;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -54,13 +76,21 @@ int Run(int argc, char** argv) {
       threads = std::stoi(value());
     } else if (a == "--json") {
       json = value();
+    } else if (a == "--pt-spp") {
+      pt_spp = std::stoi(value());
+    } else if (a == "--pt-image") {
+      pt_image = value();
+    } else if (a == "--no-pt") {
+      pathtrace = false;
     } else {
       throw std::invalid_argument("unknown option '" + a +
                                   "' (expected --scenario, --frames, "
-                                  "--threads, --json)");
+                                  "--threads, --json, --pt-spp, --pt-image, --no-pt)");
     }
   }
-  if (frames < 1 || threads < 1) throw std::invalid_argument("--frames and --threads must be >= 1");
+  if (frames < 1 || threads < 1 || pt_spp < 1) {
+    throw std::invalid_argument("--frames, --threads and --pt-spp must be >= 1");
+  }
   sim::Scenario scenario = sim::LoadScenario(scenario_path);
   const uint64_t n = std::min<uint64_t>(frames, scenario.frames);
   sim::Simulator simulator(scenario, threads);
@@ -128,15 +158,41 @@ int Run(int argc, char** argv) {
     rows.push_back(r);
   }
 
+  // (5) One path-traced frame of the furnished room.
+  raytrace::Scene room;
+  const raytrace::Camera room_camera = raytrace_bench::BuildPathTraceRoom(room);
+  raytrace::PathTraceOptions pt;
+  pt.samples_per_pixel = pt_spp;
+  pt.max_bounces = 3;
+  if (pathtrace) {
+    raytrace::BlackbodyRgb(6500);  // warm-up: the GGX albedo tables are built on first use
+    Row r{"path trace 640x480, " + std::to_string(pt_spp) + " spp, 3 bounces (room)"};
+    const double cpu0 = CpuSeconds();
+    const auto t0 = Clock::now();
+    const raytrace::Frame f = raytrace::PathTrace(room, room_camera, pt, &pool);
+    r.seconds = Seconds(t0, Clock::now());
+    r.cpu_seconds = CpuSeconds() - cpu0;
+    r.frames = 1;
+    r.rays = static_cast<double>(f.rays);
+    rows.push_back(r);
+    if (!pt_image.empty()) WritePpm(pt_image, f);
+  }
+
   std::printf("raytrace_bench: %s, %dx%d, shadows %s, %zu triangles, %d threads (%u cores)\n",
               scenario.name.c_str(), scenario.camera.width, scenario.camera.height,
               options.shadows ? "on" : "off", simulator.scene().triangle_count(), threads,
               std::thread::hardware_concurrency());
-  std::printf("%-50s %10s %10s %14s\n", "row", "fps", "ms/frame", "Mrays/s");
+  if (pathtrace) {
+    std::printf("path-trace room: %zu triangles, %d objects, 1 sun disc + sky + 2 area lights\n",
+                room.triangle_count(), room.object_count());
+  }
+  std::printf("%-50s %10s %10s %14s %10s\n", "row", "fps", "ms/frame", "Mrays/s", "cpu s");
   for (const Row& r : rows) {
     const double fps = r.frames > 0 ? r.frames / r.seconds : 0;
-    std::printf("%-50s %10.2f %10.1f %14.2f\n", r.name.c_str(), fps,
+    std::printf("%-50s %10.2f %10.1f %14.2f", r.name.c_str(), fps,
                 r.frames > 0 ? 1000 * r.seconds / r.frames : 0.0, r.rays / r.seconds / 1e6);
+    if (r.cpu_seconds >= 0) std::printf(" %10.2f", r.cpu_seconds);
+    std::printf("\n");
   }
   if (!json.empty()) {
     std::ofstream out(json);
@@ -150,10 +206,18 @@ int Run(int argc, char** argv) {
       out << "    {\"name\": \"" << r.name << "\", \"seconds\": " << r.seconds
           << ", \"fps\": " << (r.frames > 0 ? r.frames / r.seconds : 0)
           << ", \"rays\": " << static_cast<uint64_t>(r.rays)
-          << ", \"rays_per_second\": " << static_cast<uint64_t>(r.rays / r.seconds) << "}"
-          << (i + 1 < rows.size() ? "," : "") << "\n";
+          << ", \"rays_per_second\": " << static_cast<uint64_t>(r.rays / r.seconds);
+      if (r.cpu_seconds >= 0) out << ", \"cpu_seconds\": " << r.cpu_seconds;
+      out << "}" << (i + 1 < rows.size() ? "," : "") << "\n";
     }
-    out << "  ]\n}\n";
+    out << "  ]";
+    if (pathtrace) {
+      out << ",\n  \"pathtrace\": {\"scene\": \"pathtrace_room\", \"width\": " << room_camera.width
+          << ", \"height\": " << room_camera.height << ", \"samples_per_pixel\": " << pt_spp
+          << ", \"max_bounces\": " << pt.max_bounces << ", \"triangles\": " << room.triangle_count()
+          << ", \"threads\": " << threads << "}";
+    }
+    out << "\n}\n";
     if (!out) throw std::runtime_error("cannot write '" + json + "'");
     std::printf("wrote %s\n", json.c_str());
   }
