@@ -49,9 +49,12 @@ inline std::vector<cv::Point2d> Undistort(const msgs::CameraInfo& info,
   return out;
 }
 
-// For every pixel of the distorted camera, the pixel of an undistorted image (same K) that it sees:
-// cv::remap(undistorted, distorted, map_x, map_y, ...) makes the distorted view (CV_32FC1 maps).
-inline void DistortionMaps(const msgs::CameraInfo& info, cv::Mat& map_x, cv::Mat& map_y) {
+// For every pixel of the distorted camera `info`, the pixel of an undistorted image with camera
+// matrix `target` (default: info's own K) that it sees: cv::remap(undistorted, distorted, map_x,
+// map_y, ...) makes the distorted view (CV_32FC1 maps).
+inline void DistortionMaps(const msgs::CameraInfo& info, cv::Mat& map_x, cv::Mat& map_y,
+                           const cv::Matx33d* target = nullptr) {
+  const cv::Matx33d t = target ? *target : K(info);
   const int w = static_cast<int>(info.width), h = static_cast<int>(info.height);
   std::vector<cv::Point2d> pixels;
   pixels.reserve(static_cast<size_t>(w) * h);
@@ -64,8 +67,8 @@ inline void DistortionMaps(const msgs::CameraInfo& info, cv::Mat& map_x, cv::Mat
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       const cv::Point2d& p = n[static_cast<size_t>(y) * w + x];
-      map_x.at<float>(y, x) = static_cast<float>(info.fx * p.x + info.cx);
-      map_y.at<float>(y, x) = static_cast<float>(info.fy * p.y + info.cy);
+      map_x.at<float>(y, x) = static_cast<float>(t(0, 0) * p.x + t(0, 2));
+      map_y.at<float>(y, x) = static_cast<float>(t(1, 1) * p.y + t(1, 2));
     }
   }
 }
