@@ -7,8 +7,12 @@
 //       [--lockstep NODE]... [--no-clock] [--ros-args ...]
 //   sim --yaleb-style OUT_DIR [--subjects N] [--size 168x192] [--rgb] [--behind] [--seed S]
 //       [--mesh procedural|ict] [--threads N]
+//   sim --generate N --split train|validation|test --out DIR [--seed S] [--frames F] [--spp P]
+//       [--bounces B] [--size 640x480] [--threads N] [--resume]
 //
 // --yaleb-style renders a Yale-B-style face data set (sim/yaleb_style.h, docs/sim.md) and exits.
+// --generate writes N randomised evaluation scenes (sim/generate.h, docs/sim.md) and exits;
+// --resume skips scenes whose folder is complete (scene.json written last).
 // Params (launch files; the options above override them): scenario, out, preview, frames,
 // threads, rate, fast, loop, topic_prefix, ground_truth_prefix, lockstep.
 // Topics: <prefix>/image (rgb8), <prefix>/depth (depth16, mm), <prefix>/camera_info,
@@ -28,6 +32,7 @@
 #include "probeless/node/node.h"
 #include "probeless/replay/player.h"
 #include "probeless/replay/sources.h"
+#include "probeless/sim/generate.h"
 #include "probeless/sim/simulator.h"
 #include "probeless/sim/yaleb_style.h"
 
@@ -134,6 +139,48 @@ int WriteYaleBStyle(const std::string& out_dir, sim::YaleBStyleOptions options) 
   return 0;
 }
 
+// sim --generate: N scenes of a split, one after the other, each on every render thread.
+int Generate(int count, uint64_t seed, const std::string& split_name, const std::string& out_dir,
+             sim::GenerateOptions options, bool resume) {
+  const sim::Split split = sim::ParseSplit(split_name);
+  if (count < 1) throw node::UsageError("--generate: expected a scene count >= 1");
+  if (out_dir.empty()) throw node::UsageError("--generate needs --out DIR");
+  if (seed + static_cast<uint64_t>(count) > sim::kSplitSeedStride) {
+    throw node::UsageError("--seed + --generate must stay below " +
+                           std::to_string(sim::kSplitSeedStride) + " (disjoint split ranges)");
+  }
+  options.Validate();
+  const auto start = std::chrono::steady_clock::now();
+  auto last = start;
+  int written = 0, skipped = 0;
+  options.progress = [&](int scene, int frame, int frames) {
+    const auto now = std::chrono::steady_clock::now();
+    if (frame != frames && now - last < std::chrono::seconds(2)) return;
+    last = now;
+    std::fprintf(stderr, "[info] [sim] generate: scene %d/%d, frame %d/%d (%.0f s)\n", scene + 1,
+                 count, frame, frames, std::chrono::duration<double>(now - start).count());
+  };
+  for (int k = 0; k < count; ++k) {
+    const uint64_t scene_seed = sim::SplitSeedBase(split) + seed + static_cast<uint64_t>(k);
+    const sim::GeneratedScene scene = sim::GenerateScene(scene_seed, split, options);
+    if (resume &&
+        std::filesystem::exists(std::filesystem::path(out_dir) / scene.name / "scene.json")) {
+      ++skipped;
+      continue;
+    }
+    const sim::GeneratedSceneSummary summary = sim::WriteGeneratedScene(scene, options, out_dir, k);
+    ++written;
+    std::fprintf(stderr,
+                 "[info] [sim] generate: %s (%s, %s, object seen in %d/%d frames) in %.1f s\n",
+                 summary.folder.c_str(), scene.room.c_str(), scene.light_type.c_str(),
+                 summary.frames_object_visible, summary.frames, summary.seconds);
+  }
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("sim: wrote %d %s scenes (%d already complete) to %s in %.1f s\n", written,
+              split_name.c_str(), skipped, out_dir.c_str(), s);
+  return 0;
+}
+
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "sim");
   std::string scenario_path = node.Param("scenario", "");
@@ -155,6 +202,11 @@ int Run(int argc, char** argv) {
   std::string yaleb_out;
   sim::YaleBStyleOptions yaleb;
   bool yaleb_option_seen = false;
+  int generate_count = -1;
+  std::string split;
+  sim::GenerateOptions generate;
+  bool resume = false;
+  uint64_t generate_seed = 0;
   for (size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     auto value = [&]() -> const std::string& {
@@ -183,6 +235,16 @@ int Run(int argc, char** argv) {
       player_options.lockstep_nodes.push_back(value());
     } else if (a == "--no-clock") {
       player_options.clock_topic.clear();
+    } else if (a == "--generate") {
+      generate_count = static_cast<int>(node::ParseNumberOption(a, value()));
+    } else if (a == "--split") {
+      split = value();
+    } else if (a == "--spp") {
+      generate.samples_per_pixel = static_cast<int>(node::ParseNumberOption(a, value()));
+    } else if (a == "--bounces") {
+      generate.bounces = static_cast<int>(node::ParseNumberOption(a, value()));
+    } else if (a == "--resume") {
+      resume = true;
     } else if (a == "--yaleb-style") {
       yaleb_out = value();
     } else if (a == "--subjects") {
@@ -195,15 +257,15 @@ int Run(int argc, char** argv) {
       if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2) {
         throw node::UsageError("--size: expected WIDTHxHEIGHT, got '" + size + "'");
       }
-      yaleb.width = w;
-      yaleb.height = h;
+      yaleb.width = generate.width = w;
+      yaleb.height = generate.height = h;
       yaleb_option_seen = true;
     } else if (a == "--rgb") {
       yaleb.rgb = yaleb_option_seen = true;
     } else if (a == "--behind") {
       yaleb.behind = yaleb_option_seen = true;
     } else if (a == "--seed") {
-      yaleb.seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      yaleb.seed = generate_seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
       yaleb_option_seen = true;
     } else if (a == "--mesh") {
       yaleb.mesh = value();
@@ -223,6 +285,17 @@ int Run(int argc, char** argv) {
     if (positional_seen) throw node::UsageError("--yaleb-style takes no scenario");
     yaleb.threads = options.threads;
     return WriteYaleBStyle(yaleb_out, yaleb);
+  }
+  if (generate_count >= 0) {
+    if (positional_seen) throw node::UsageError("--generate takes no scenario");
+    if (split.empty()) throw node::UsageError("--generate needs --split train|validation|test");
+    generate.threads = options.threads;
+    if (options.max_frames > 0) generate.frames = static_cast<int>(options.max_frames);
+    try {
+      return Generate(generate_count, generate_seed, split, out, generate, resume);
+    } catch (const sim::ScenarioError& error) {
+      throw node::UsageError(error.what());
+    }
   }
   if (yaleb_option_seen) {
     throw node::UsageError(
