@@ -96,7 +96,6 @@ struct Scene {
   std::vector<eval::InsertedObject> objects;
   std::optional<eval::Truth> truth;
   std::vector<eval::RgbEntry> frames;
-  bool has_sh = false;
 };
 
 std::string MaskName(const std::string& rgb_file) {
@@ -110,7 +109,6 @@ Scene LoadScene(const fs::path& dir) {
   s.objects = eval::LoadInsertion((dir / "insertion.yaml").string(), s.name + "/insertion.yaml");
   if (fs::exists(dir / "truth.json")) {
     s.truth = eval::LoadTruth((dir / "truth.json").string(), s.name + "/truth.json");
-    for (const auto& f : s.truth->frames) s.has_sh = s.has_sh || f.sh_camera.has_value();
   }
   s.frames = eval::LoadRgbList((dir / "rgb.txt").string(), s.name + "/rgb.txt");
   if (s.frames.empty()) throw eval::EvalError(s.name + "/rgb.txt: no frames");
@@ -636,6 +634,9 @@ int Run(int argc, char** argv) {
     std::cerr << "composite_eval: " << e.what() << "\n";
     exit_code = 2;
   } catch (const dataset::DatasetError& e) {
+    std::cerr << "composite_eval: " << e.what() << "\n";
+    exit_code = 2;
+  } catch (const rectify::RectifyError& e) {
     std::cerr << "composite_eval: " << e.what() << "\n";
     exit_code = 2;
   } catch (const std::exception& e) {
