@@ -4,6 +4,7 @@
 // truth.json from the simulator's light at the camera), then the tool on them:
 // - the oracle light ranks ahead of the baseline (scale-invariant RMSE on the object);
 // - a negative control: insertion.yaml's sphere moved by 10 cm raises ours' object error;
+// - a box turned by its quaternion fits its rendering better than unturned;
 // - an object outside every view is warned about and its scene still evaluated;
 // - a malformed insertion.yaml, a missing rgb_inserted frame and an unknown option exit 2 with
 //   one-line messages.
@@ -40,14 +41,31 @@ constexpr int kFrames = 5;
 constexpr double kRadius = 0.09;
 constexpr double kSphere[3] = {0.25, 0.775 + kRadius, 0.85};
 
-// The scenario: a table on a floor before a wall, under a sun and a sky; `with_sphere` adds the
-// inserted object (id 99) as real geometry.
-std::string Scenario(bool with_sphere) {
+// The inserted sphere as a scenario object (id 99).
+std::string SphereObject() {
   char sphere[256];
   std::snprintf(sphere, sizeof sphere,
                 "  - {name: inserted, id: 99, shape: sphere, radius: %.3f, position: [%.3f, %.3f, "
                 "%.3f], color: [0.75, 0.75, 0.75]}\n",
                 kRadius, kSphere[0], kSphere[1], kSphere[2]);
+  return sphere;
+}
+
+// A box turned 30 degrees about the vertical, on the table left of the sphere's place (id 99),
+// and the same in insertion.yaml (quaternion about y; `rotated` false: the control without it).
+const std::string kBoxObject =
+    "  - {name: inserted, id: 99, shape: box, size: [0.16, 0.1, 0.12], position: [0.0, 0.825, "
+    "0.75], rotation_deg: [0, 30, 0], color: [0.7, 0.5, 0.4]}\n";
+std::string BoxInsertion(bool rotated) {
+  return std::string(
+             "objects:\n  - shape: box\n    size: [0.16, 0.1, 0.12]\n"
+             "    albedo: [0.7, 0.5, 0.4]\n    position: [0.0, 0.825, 0.75]\n") +
+         (rotated ? "    rotation: [0, 0.25881904510252074, 0, 0.9659258262890683]\n" : "");
+}
+
+// The scenario: a table on a floor before a wall, under a sun and a sky; `inserted` adds the
+// inserted object as real geometry.
+std::string Scenario(const std::string& inserted) {
   return std::string(
              "name: composite_tiny\nseed: 3\nfps: 30\nframes: 5\n"
              "camera:\n  width: 640\n  height: 480\n  fx: 525\n  fy: 525\n"
@@ -66,7 +84,7 @@ std::string Scenario(bool with_sphere) {
              "0.9], color: [0.6, 0.45, 0.3]}\n"
              "  - {name: box, shape: box, size: [0.2, 0.2, 0.2], position: [0.65, 0.875, 1.0], "
              "color: [0.3, 0.5, 0.7]}\n") +
-         (with_sphere ? sphere : "") +
+         inserted +
          "lights:\n"
          "  - {name: sun, type: directional, direction: [-0.5, 1.0, -0.45], color: [1, 0.97, "
          "0.92], intensity: 2.2}\n";
@@ -94,9 +112,11 @@ std::string Insertion(double dx, double z_offset = 0) {
 }
 
 // Writes the scene folder `dir` in the composite_eval format.
-void MakeScene(const fs::path& dir, const std::string& insertion) {
-  const sim::Scenario plain = sim::ParseScenario(Scenario(false), "tiny.yaml", ".");
-  const sim::Scenario with = sim::ParseScenario(Scenario(true), "tiny_inserted.yaml", ".");
+// `inserted`: the scenario object standing for the inserted one (rgb_inserted/, the masks).
+void MakeScene(const fs::path& dir, const std::string& insertion,
+               const std::string& inserted = SphereObject()) {
+  const sim::Scenario plain = sim::ParseScenario(Scenario(""), "tiny.yaml", ".");
+  const sim::Scenario with = sim::ParseScenario(Scenario(inserted), "tiny_inserted.yaml", ".");
   sim::Simulator plain_sim(plain, 2), with_sim(with, 2);
   for (const char* sub : {"rgb", "depth", "rgb_inserted", "mask_object", "mask_effect"}) {
     fs::create_directories(dir / sub);
@@ -176,6 +196,9 @@ class CompositeEval : public ::testing::Test {
     // 5 m behind the first camera: in no view. rgb_inserted stays as rendered (the sphere's
     // pixels only count where the masks say).
     WriteText(scenes / "outside" / "insertion.yaml", Insertion(0, -6.0));
+    MakeScene(scenes / "box", BoxInsertion(true), kBoxObject);
+    fs::copy(scenes / "box", scenes / "box_unrotated", fs::copy_options::recursive);
+    WriteText(scenes / "box_unrotated" / "insertion.yaml", BoxInsertion(false));
     run_ = new CommandResult(RunCommand(
         std::string(PROBELESS_BIN_DIR) + "/composite_eval --scenes " + scenes.string() +
             " --json " + root_->path() + "/out.json --sheets " + root_->path() + "/sheets",
@@ -230,10 +253,10 @@ TEST_F(CompositeEval, OracleRanksAheadOfBaselineAndEveryKeyIsThere) {
     EXPECT_TRUE((*json_)["summary"][key]["median"]) << key;
     EXPECT_TRUE((*json_)["summary"][key]["p90"]) << key;
   }
-  EXPECT_EQ((*json_)["summary"]["scene_count"].as<int>(), 3);
+  EXPECT_EQ((*json_)["summary"]["scene_count"].as<int>(), 5);
   EXPECT_GT(good["frames_with_estimate"].as<int>(), 0);
   EXPECT_TRUE(fs::is_regular_file(root_->path() + "/sheets/good.png"));
-  EXPECT_NE(run_->err.find("scene 1/3 'good'"), std::string::npos) << run_->err;
+  EXPECT_NE(run_->err.find("scene 3/5 'good'"), std::string::npos) << run_->err;
 }
 
 TEST_F(CompositeEval, MovingTheObjectBy10CmRaisesOursError) {
@@ -241,6 +264,18 @@ TEST_F(CompositeEval, MovingTheObjectBy10CmRaisesOursError) {
   const YAML::Node good = SceneJson("good"), moved = SceneJson("moved");
   EXPECT_GT(moved["ours_rmse_object"].as<double>(), good["ours_rmse_object"].as<double>());
   EXPECT_GT(moved["ours_si_rmse_object"].as<double>(), good["ours_si_rmse_object"].as<double>());
+}
+
+TEST_F(CompositeEval, ABoxIsPlacedAndTurnedByItsQuaternion) {
+  ExpectRan();
+  const YAML::Node box = SceneJson("box"), unrotated = SceneJson("box_unrotated");
+  std::cerr << "box: oracle rmse " << box["oracle_rmse_object"].as<double>() << " (unrotated "
+            << unrotated["oracle_rmse_object"].as<double>() << "), oracle si "
+            << box["oracle_si_rmse_object"].as<double>() << ", baseline si "
+            << box["baseline_si_rmse_object"].as<double>() << "\n";
+  EXPECT_LT(box["oracle_si_rmse_object"].as<double>(), box["baseline_si_rmse_object"].as<double>());
+  // The turn matters: without it the silhouette misses part of the mask.
+  EXPECT_LT(box["oracle_rmse_object"].as<double>(), unrotated["oracle_rmse_object"].as<double>());
 }
 
 TEST_F(CompositeEval, AnObjectOutsideEveryViewIsWarnedAboutAndTheSceneStillEvaluated) {
