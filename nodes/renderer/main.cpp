@@ -17,13 +17,16 @@
 // frame of scene/pose), scene_mesh, shadows (bool: virtual shadows on the proxy head / scene mesh),
 // samples, bands, backend (offscreen | window), trigger (light | image: what starts a frame), tone
 // (clamp | reinhard), exposure, white, video (file), video_fps, png_dir, max_frames (0 =
-// unlimited). Exit: 0 on shutdown or after max_frames, 2 on bad params or content.
+// unlimited). Exit: 0 on shutdown or after max_frames, 2 on bad params or content, 1 when the
+// window back-end's X display goes away (one line on stderr).
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <exception>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "probeless/msgs/msgs.h"
@@ -220,8 +223,31 @@ int Run(int argc, char** argv) {
                         if (trigger == "light") render_frame();
                       }});
 
+  // The window back-end idles between frames, so a watcher notices a display that went away
+  // (X server killed, ssh -X session closed) instead of the node waiting on it forever.
+  std::atomic<bool> display_lost{false};
+  std::thread watcher;
+  if (backend == render::Backend::kWindow) {
+    watcher = std::thread([&] {
+      while (node.ok()) {
+        if (renderer.DisplayLost()) {
+          display_lost = true;
+          node::RequestShutdown();
+          break;
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
+    });
+  }
   node.Spin(handlers);
+  if (watcher.joinable()) watcher.join();
   node.Info() << "rendered " << frames << " frames";
+  if (display_lost) {
+    node.Error()
+        << "window backend: the X display closed the connection; exiting (backend:=offscreen "
+           "needs no display)";
+    return 1;
+  }
   return 0;
 }
 

@@ -19,6 +19,9 @@ class Context {
   virtual std::vector<int> TakeKeys() { return {}; }
   virtual bool Closed() const { return false; }
   virtual std::array<int, 2> FramebufferSize() const { return {0, 0}; }
+  // Window back-end: the display server has closed the connection. Thread-safe (reads the
+  // connection's socket only).
+  virtual bool DisplayLost() const { return false; }
 };
 
 // OSMesa context (4.5 core, else 3.3 core) on a width x height RGBA buffer. Throws RenderError.

@@ -1,11 +1,19 @@
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
+#include <X11/Xlib.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <cstdio>
 #include <mutex>
 #include <string>
 
 #include "context.h"
 #include "probeless/render/renderer.h"
+
+// GLFW's X11 native accessor (glfw3native.h would need the Xrandr headers for just this).
+extern "C" Display* glfwGetX11Display(void);
 
 namespace probeless::render::internal {
 
@@ -18,6 +26,16 @@ std::string& LastGlfwError() {
 
 void OnError(int code, const char* description) {
   LastGlfwError() = description != nullptr ? description : ("error " + std::to_string(code));
+}
+
+// Xlib's default handler of a dead connection calls exit(), which can hang in atexit handlers while
+// GL worker threads run: one clear line and _exit instead.
+int OnDisplayLost(Display*) {
+  static const char kMessage[] =
+      "[error] render: the X display closed the connection (window backend); run with "
+      "backend:=offscreen or under xvfb-run -a\n";
+  (void)!::write(STDERR_FILENO, kMessage, sizeof(kMessage) - 1);
+  ::_exit(1);
 }
 
 class GlfwContext final : public Context {
@@ -45,6 +63,11 @@ class GlfwContext final : public Context {
       throw RenderError("GLFW: cannot create a window with an OpenGL 4.5 or 3.3 core context (" +
                         error + ")");
     }
+    // GLFW 3.3 on Debian runs on X11 only.
+    if (Display* display = glfwGetX11Display()) {
+      XSetIOErrorHandler(OnDisplayLost);
+      display_fd_ = ConnectionNumber(display);
+    }
     glfwMakeContextCurrent(window_);
     glfwSwapInterval(0);
     glfwSetWindowUserPointer(window_, this);
@@ -56,6 +79,7 @@ class GlfwContext final : public Context {
     });
   }
   ~GlfwContext() override {
+    if (DisplayLost()) return;  // nothing to tear down on a dead connection (Xlib would exit)
     glfwDestroyWindow(window_);
     glfwTerminate();
   }
@@ -74,6 +98,15 @@ class GlfwContext final : public Context {
     return keys;
   }
   bool Closed() const override { return glfwWindowShouldClose(window_); }
+  bool DisplayLost() const override {
+    if (display_fd_ < 0) return false;
+    pollfd p{display_fd_, POLLIN, 0};
+    if (::poll(&p, 1, 0) <= 0) return false;
+    if (p.revents & (POLLHUP | POLLERR | POLLNVAL)) return true;
+    // Readable: events, or end of stream when the server has gone (peek, so Xlib still reads them).
+    char byte;
+    return ::recv(display_fd_, &byte, 1, MSG_PEEK | MSG_DONTWAIT) == 0;
+  }
   std::array<int, 2> FramebufferSize() const override {
     int w = 0, h = 0;
     glfwGetFramebufferSize(window_, &w, &h);
@@ -83,6 +116,7 @@ class GlfwContext final : public Context {
  private:
   GLFWwindow* window_ = nullptr;
   std::vector<int> keys_;
+  int display_fd_ = -1;  // the X connection's socket (X11 platform only)
 };
 
 }  // namespace

@@ -788,6 +788,8 @@ std::vector<int> Renderer::TakeKeys() {
 
 bool Renderer::WindowClosed() const { return impl_->context->Closed(); }
 
+bool Renderer::DisplayLost() const { return impl_->context->DisplayLost(); }
+
 std::array<int, 2> Renderer::WindowSize() const { return impl_->context->FramebufferSize(); }
 
 }  // namespace probeless::render

@@ -211,6 +211,10 @@ class Renderer {
   std::vector<int> TakeKeys();
   // True once the user closed the window (or pressed Escape).
   bool WindowClosed() const;
+  // Window back-end: the X display has gone (server died or closed the connection); false for
+  // offscreen. Thread-safe: a watcher thread may poll it while the renderer idles. Drawing on a
+  // lost display ends the process with exit code 1 and one line on stderr instead of hanging.
+  bool DisplayLost() const;
   // Window framebuffer size in pixels.
   std::array<int, 2> WindowSize() const;
 
