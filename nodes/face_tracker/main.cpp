@@ -2,9 +2,10 @@
 // model's positions on it (docs/face_light.md, "face_tracker node").
 //
 // Subscribes `image` (msgs::Image rgb8 / bgr8 / mono8) and `camera_info` (msgs::CameraInfo,
-// optional: intrinsics for the head pose; without it a 60-degree guess). Publishes
-// `face/observation` (msgs::FaceObservation) for every image (face_detected = 0 when none) and,
-// with publish_debug_image, `face/debug_image` (rgb8, samples drawn: paper figure 1c).
+// optional: intrinsics for the head pose; without it a 60-degree guess; a pinhole: with lens
+// distortion it warns once, launch files feed the rectify node's image_rect / camera_info_rect).
+// Publishes `face/observation` (msgs::FaceObservation) for every image (face_detected = 0 when
+// none) and, with publish_debug_image, `face/debug_image` (rgb8, samples drawn: paper figure 1c).
 //
 // Params: backend (dlib | yunet | haar), shape_predictor_path, yunet_model_path,
 // haar_cascade_path, redetect_period, detect_max_width, pose_smoothing, flow_tracking (true),
@@ -16,6 +17,7 @@
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or models (one line on stderr), 1 otherwise.
 #include "probeless/node/main.h"
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <optional>
@@ -92,8 +94,20 @@ int Run(int argc, char** argv) {
   std::vector<uint8_t> drawn;
   int64_t frames = 0, found = 0;
 
+  bool warned_distortion = false;
   auto on_info = [&](bus::Sample&& sample) {
     const auto info = msgs::ReadMessage<msgs::CameraInfo>(sample.data());
+    // Landmarks, head pose and samples assume a pinhole: a lens must be rectified first.
+    const bool distorted =
+        std::any_of(info->distortion, info->distortion + std::min(info->distortion_count, 8u),
+                    [](double d) { return d != 0; });
+    if (distorted && !warned_distortion) {
+      node.Warn() << node.ResolveTopicName("camera_info") << " has lens distortion ("
+                  << msgs::DistortionModelName(info->distortion_model)
+                  << "): landmarks and head pose assume a pinhole; feed the rectify node's "
+                     "image_rect and camera_info_rect (docs/rectify.md; the launch files do)";
+      warned_distortion = true;
+    }
     if (info->fx > 0 && info->fy > 0)
       intrinsics = ft::Intrinsics{info->fx, info->fy, info->cx, info->cy};
   };
