@@ -18,6 +18,8 @@ namespace probeless::composite_eval {
 
 namespace {
 
+volatile sig_atomic_t stop_requested = 0;
+
 Rgb8 CopyImage(const bus::Sample& s) {
   const auto m = msgs::ReadMessage<msgs::Image>(s.data());
   Rgb8 out;
@@ -33,6 +35,9 @@ Rgb8 CopyImage(const bus::Sample& s) {
 }
 
 }  // namespace
+
+void RequestStop() { stop_requested = 1; }
+bool StopRequested() { return stop_requested != 0; }
 
 GraphOutput RunGraph(const GraphArgs& args, const std::function<void(size_t)>& progress) {
   // The bus reads the domain at each call: set it before the subscribers and the fork.
@@ -106,10 +111,11 @@ GraphOutput RunGraph(const GraphArgs& args, const std::function<void(size_t)>& p
       if (done == pid) break;
       const double elapsed =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      if (!interrupted && elapsed > args.timeout_s) {
+      if (!interrupted && (elapsed > args.timeout_s || StopRequested())) {
         ::kill(pid, SIGINT);  // the supervisor stops its graph
         interrupted = true;
-        out.timed_out = true;
+        out.timed_out = !StopRequested();
+        out.interrupted = StopRequested();
       }
     }
     drain();

@@ -27,11 +27,17 @@ struct Rgb8 {
   std::vector<uint8_t> rgb;  // packed
 };
 
+// Set by the tool's SIGINT/SIGTERM handler: RunGraph stops the launch (SIGINT) and returns with
+// `interrupted`.
+void RequestStop();
+bool StopRequested();
+
 struct GraphOutput {
   std::map<int64_t, Rgb8> ours, oracle, baseline;  // by header.stamp_ns
   std::map<int64_t, msgs::ShLight> lights;         // /scene/light by stamp
   int exit_code = 0;
   bool timed_out = false;
+  bool interrupted = false;
 };
 
 // Runs the graph and collects its outputs until the launch ends. `progress(done)` is called with

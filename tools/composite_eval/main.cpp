@@ -7,7 +7,9 @@
 //
 //   composite_eval --scenes DIR [--only NAME,...] [--mode gbuffer|depth] --json OUT [--sheets DIR]
 //
-// Exit: 0 done; 2 bad command line or scene folder (one line naming the file); 1 a graph failed.
+// Exit: 0 done; 2 bad command line or scene folder (one line naming the file); 1 a graph failed;
+// 130 after SIGINT/SIGTERM (the graph stopped, the work folder removed).
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -48,6 +50,11 @@ constexpr int kProxyStride = 6;  // px between the scene proxy's vertices (2.5-4
 struct UsageError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
+
+// SIGINT/SIGTERM during a scene: the graph was stopped; the tool cleans up and exits 130.
+struct Interrupted {};
+
+void OnSignal(int) { composite_eval::RequestStop(); }
 
 struct Options {
   std::string scenes, json, sheets, mode = "gbuffer";
@@ -408,6 +415,7 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
   const composite_eval::GraphOutput out = composite_eval::RunGraph(graph, [&](size_t done) {
     std::cerr << tag << ": frame " << done << "/" << scene.frames.size() << "\n";
   });
+  if (out.interrupted) throw Interrupted();
   if (out.exit_code != 0 || out.timed_out) {
     std::ifstream log(graph.log_path);
     std::vector<std::string> lines;
@@ -625,11 +633,20 @@ int Run(int argc, char** argv) {
   fs::create_directories(work);
   std::vector<SceneResult> results;
   int exit_code = 0;
+  struct sigaction action = {};
+  action.sa_handler = OnSignal;
+  ::sigaction(SIGINT, &action, nullptr);
+  ::sigaction(SIGTERM, &action, nullptr);
   try {
     for (size_t k = 0; k < scenes.size(); ++k) {
+      if (composite_eval::StopRequested()) throw Interrupted();
       results.push_back(
           EvaluateScene(scenes[k], k, scenes.size(), options, work, bin_dir, launch_file));
     }
+  } catch (const Interrupted&) {
+    std::cerr << "composite_eval: interrupted\n";
+    fs::remove_all(work);
+    return 130;
   } catch (const eval::EvalError& e) {
     std::cerr << "composite_eval: " << e.what() << "\n";
     exit_code = 2;
