@@ -189,6 +189,45 @@ TEST(Transfer, FastAgreesWithFull) {
   EXPECT_LT(diff / norm, 0.06) << "mean relative difference of bands 0-1";
 }
 
+// The differential renderer's window: the same bits as the whole-image transfer at its pixels, for
+// every step and with the indirect term; bad rects are refused.
+TEST(Transfer, RegionEqualsTheFullTransferAtItsPixels) {
+  const Scene scene(Shape::kValley);
+  light::TransferOptions o;
+  o.subsample = 4;  // ignored by ComputeRegion
+  light::TransferOptions full_o;
+  light::TransferComputer region(o), full(full_o);
+  const float r2 = std::sqrt(0.5f);
+  const light::DominantLight light{{r2, 0, -r2}, 3.0f};
+  light::TransferResult a, b;
+  full.Compute(scene.View(), {}, &light, &a);
+  for (int step : {1, 3}) {
+    const light::PixelRect rect{70, 40, 101, 77};
+    region.ComputeRegion(scene.View(), {}, &light, rect, step, &b);
+    ASSERT_EQ(b.width, (31 + step - 1) / step);
+    ASSERT_EQ(b.height, (37 + step - 1) / step);
+    for (int j = 0; j < b.height; ++j) {
+      for (int i = 0; i < b.width; ++i) {
+        const size_t p =
+            static_cast<size_t>(40 + j * step + step / 2) * 160 + 70 + i * step + step / 2;
+        const size_t q = static_cast<size_t>(j) * b.width + i;
+        ASSERT_EQ(b.valid[q], a.valid[p]);
+        for (int k = 0; k < 16; ++k) ASSERT_EQ(b.transfer[q * 16 + k], a.transfer[p * 16 + k]);
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(b.indirect[3 * q + c], a.indirect[3 * p + c]);
+      }
+    }
+  }
+  EXPECT_EQ(ErrorOf([&] {
+              region.ComputeRegion(scene.View(), {}, nullptr, {150, 0, 161, 10}, 1, &b);
+            }),
+            "light::TransferComputer::ComputeRegion: rect [150, 161) x [0, 10) is empty or not "
+            "inside 160x120");
+  EXPECT_EQ(ErrorOf([&] {
+              region.ComputeRegion(scene.View(), {}, nullptr, {0, 0, 5, 5}, 0, &b);
+            }),
+            "light::TransferComputer::ComputeRegion: step must be >= 1, got 0");
+}
+
 TEST(Transfer, FastKeepsItsSparseSamples) {
   const Scene scene(Shape::kValley);
   light::TransferOptions o;

@@ -163,9 +163,9 @@ void TransferComputer::AddClampedCosine(float x, float y, float z, float* out) c
 TransferComputer::~TransferComputer() = default;
 
 void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux,
-                                   const DominantLight* light, int step, int out_width,
-                                   int row_begin, int row_end, float* transfer, uint8_t* valid,
-                                   float* indirect) const {
+                                   const DominantLight* light, int step, int x0_pixel, int y0_pixel,
+                                   int out_width, int row_begin, int row_end, float* transfer,
+                                   uint8_t* valid, float* indirect) const {
   const int w = g.width, h = g.height;
   const int n_dir = directions_.count();
   const int cc = directions_.coefficient_count();
@@ -206,9 +206,9 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
   internal::PixelOcclusion occ;
 
   for (int r = row_begin; r < row_end; ++r) {
-    const int v = std::min(r * step + step / 2, h - 1);
+    const int v = std::min(y0_pixel + r * step + step / 2, h - 1);
     for (int c = 0; c < out_width; ++c) {
-      const int u = std::min(c * step + step / 2, w - 1);
+      const int u = std::min(x0_pixel + c * step + step / 2, w - 1);
       const size_t p = static_cast<size_t>(v) * w + u;
       const size_t o = static_cast<size_t>(r) * out_width + c;
       float* t_out = transfer + o * cc;
@@ -366,7 +366,7 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
     out->samples.clear();
     out->sample_valid.clear();
     internal::ParallelRows(threads, h, 8, [&](int begin, int end) {
-      ComputeRows(g, aux, light, 1, w, begin, end, out->transfer.data(), out->valid.data(),
+      ComputeRows(g, aux, light, 1, 0, 0, w, begin, end, out->transfer.data(), out->valid.data(),
                   light ? out->indirect.data() : nullptr);
     });
     return;
@@ -380,7 +380,7 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
   low_valid.resize(low);
   low_indirect_.resize(light ? 3 * low : 0);
   internal::ParallelRows(threads, lh, 2, [&](int begin, int end) {
-    ComputeRows(g, aux, light, step, lw, begin, end, low_transfer.data(), low_valid.data(),
+    ComputeRows(g, aux, light, step, 0, 0, lw, begin, end, low_transfer.data(), low_valid.data(),
                 light ? low_indirect_.data() : nullptr);
   });
   // Fill invalid low-resolution samples from valid 8-neighbours (3 passes) so that edges do not
@@ -491,6 +491,50 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
         horizontal.template operator()<0>();
       }
     }
+  });
+}
+
+void TransferComputer::ComputeRegion(const GeometryView& g, const AuxiliaryBuffers& aux,
+                                     const DominantLight* light, const PixelRect& rect, int step,
+                                     TransferResult* out) {
+  ValidateGeometryView(g, "TransferComputer::ComputeRegion");
+  for (size_t i = 0; i < aux.views.size(); ++i) ValidateAux(aux.views[i], i);
+  if (step < 1) {
+    throw LightError("light::TransferComputer::ComputeRegion: step must be >= 1, got " +
+                     std::to_string(step));
+  }
+  if (rect.empty() || rect.x0 < 0 || rect.y0 < 0 || rect.x1 > g.width || rect.y1 > g.height) {
+    throw LightError("light::TransferComputer::ComputeRegion: rect [" + std::to_string(rect.x0) +
+                     ", " + std::to_string(rect.x1) + ") x [" + std::to_string(rect.y0) + ", " +
+                     std::to_string(rect.y1) + ") is empty or not inside " +
+                     std::to_string(g.width) + "x" + std::to_string(g.height));
+  }
+  if (light != nullptr) {
+    for (float v : light->direction) {
+      if (!std::isfinite(v)) throw LightError("light::TransferComputer::ComputeRegion: bad light");
+    }
+    if (!(light->intensity > 0)) light = nullptr;
+  }
+  const int cc = directions_.coefficient_count();
+  const int ow = (rect.width() + step - 1) / step, oh = (rect.height() + step - 1) / step;
+  const size_t samples = static_cast<size_t>(ow) * oh;
+  out->width = ow;
+  out->height = oh;
+  out->coefficient_count = cc;
+  out->transfer.resize(samples * cc);
+  out->valid.resize(samples);
+  if (light) {
+    out->indirect.resize(3 * samples);
+  } else {
+    out->indirect.clear();
+  }
+  out->sample_step = 1;
+  out->sample_width = out->sample_height = 0;
+  out->samples.clear();
+  out->sample_valid.clear();
+  internal::ParallelRows(options_.threads, oh, 4, [&](int begin, int end) {
+    ComputeRows(g, aux, light, step, rect.x0, rect.y0, ow, begin, end, out->transfer.data(),
+                out->valid.data(), light ? out->indirect.data() : nullptr);
   });
 }
 

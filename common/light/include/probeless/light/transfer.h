@@ -134,6 +134,18 @@ struct TransferResult {
   std::vector<uint8_t> sample_valid;
 };
 
+// A rectangle of pixels of the main view: columns [x0, x1), rows [y0, y1) (pixel (0, 0) the
+// top-left one).
+struct PixelRect {
+  int x0 = 0;
+  int y0 = 0;
+  int x1 = 0;
+  int y1 = 0;
+  int width() const { return x1 - x0; }
+  int height() const { return y1 - y0; }
+  bool empty() const { return x1 <= x0 || y1 <= y0; }
+};
+
 // Computes T (and optionally R_i) per pixel. Holds the direction set, the 2x2 offset table and
 // scratch buffers; one instance per thread of use (Compute is not re-entrant).
 class TransferComputer {
@@ -154,10 +166,23 @@ class TransferComputer {
   void Compute(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
                TransferResult* out);
 
+  // T (and R_i with `light`) of the pixels of `rect` only, every `step`-th: output sample (i, j)
+  // is pixel (min(rect.x0 + i step + step / 2, width - 1), min(rect.y0 + j step + step / 2,
+  // height - 1)), `out` sized ceil(rect.width / step) x ceil(rect.height / step) (transfer,
+  // valid, indirect; no sparse samples), every value bit-identical to what Compute with subsample
+  // 1 gives at that pixel (the 2x2 offsets are keyed by the full-resolution pixel), whatever the
+  // options' subsample. The differential renderer's window (Gruber §5.4: R'_d differs from R_d
+  // only near the virtual objects) and sparse averages. Throws LightError as Compute, and for a
+  // rect not inside the view or empty, or step < 1.
+  void ComputeRegion(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
+                     const PixelRect& rect, int step, TransferResult* out);
+
  private:
+  // Output rows [row_begin, row_end) of out_width samples: sample (c, r) is pixel
+  // (min(x0 + c step + step / 2, w - 1), min(y0 + r step + step / 2, h - 1)).
   void ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
-                   int step, int out_width, int row_begin, int row_end, float* transfer,
-                   uint8_t* valid, float* indirect) const;
+                   int step, int x0, int y0, int out_width, int row_begin, int row_end,
+                   float* transfer, uint8_t* valid, float* indirect) const;
   // out[k] += (A_l / pi) Y_k(n) for unit n (the unoccluded transfer; analytic_unoccluded).
   void AddClampedCosine(float x, float y, float z, float* out) const;
   TransferOptions options_;
