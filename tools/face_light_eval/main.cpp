@@ -3,7 +3,8 @@
 // elevation (Knorr & Kurz 2014, sec. 5.1). Writes JSON figures and optional PNG plots.
 //
 //   face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]
-//                   [--landmarks aligned|tracker] [--head-pose none|tracker] --json OUT
+//                   [--landmarks aligned|tracker] [--head-pose none|tracker [--train-yaleb DIR]]
+//                   --json OUT
 //                   [--plots DIR] [--ridge X] [--back-prior X] [--robust] [--robust-threshold X]
 //                   [--non-negative] [--weight-floor X]
 #include <algorithm>
@@ -51,6 +52,8 @@ constexpr const char* kUsage =
     "  --head-pose tracker   rotate each estimate from the face frame into the camera frame by\n"
     "                        the subject's head rotation relative to the training subjects' mean,\n"
     "                        from the face tracker on its frontal-lit image (default: none)\n"
+    "  --train-yaleb DIR     with --head-pose tracker: the Yale B folder of the model's training\n"
+    "                        subjects (default: the --yaleb folder)\n"
     "  --plots DIR           write azimuth/elevation scatter plots and lat-long maps (PNG)\n"
     "  estimator options: --ridge X --back-prior X --robust --robust-threshold X\n"
     "                     --non-negative --weight-floor X --linear-direction\n"
@@ -354,6 +357,7 @@ std::array<double, 9> MeanRotation(const std::vector<std::array<double, 9>>& rot
 int Run(int argc, char** argv) {
   std::string model_path, yaleb, subjects_text, json_path, plots, landmarks = "aligned";
   std::string head_pose = "none";
+  std::string train_yaleb;  // where the training subjects' images are (--head-pose tracker)
   fl::EstimatorOptions options;
   bool synthetic = false;
   for (int i = 1; i < argc; ++i) {
@@ -392,6 +396,8 @@ int Run(int argc, char** argv) {
     } else if (flag == "--yaleb" || flag == "--synthetic") {
       yaleb = value;
       synthetic = flag == "--synthetic";
+    } else if (flag == "--train-yaleb") {
+      train_yaleb = value;
     } else if (flag == "--subjects") {
       subjects_text = value;
     } else if (flag == "--landmarks") {
@@ -463,18 +469,22 @@ int Run(int argc, char** argv) {
   // training subjects): R_s * mean^T (identity without --head-pose tracker).
   std::map<int, std::array<double, 9>> to_camera;
   std::map<int, FrontalTrack> frontal;
-  if (head_pose == "tracker" || landmarks == "tracker") {
-    std::vector<int> all = trained;
-    all.insert(all.end(), subjects.begin(), subjects.end());
-    frontal = FrontalTracks(yaleb, all);
-  }
+  if (head_pose == "tracker" || landmarks == "tracker") frontal = FrontalTracks(yaleb, subjects);
   if (head_pose == "tracker") {
+    // The training subjects' frontal images: --train-yaleb, else the test folder (a folder of
+    // unseen subjects alone does not hold them).
+    const std::string train_dir = train_yaleb.empty() ? yaleb : train_yaleb;
+    const std::map<int, FrontalTrack> training = FrontalTracks(train_dir, trained);
     std::vector<std::array<double, 9>> training_poses;
-    for (int s : trained) {
-      if (frontal.count(s)) training_poses.push_back(frontal.at(s).rotation);
-    }
+    for (const auto& [s, track] : training) training_poses.push_back(track.rotation);
     if (training_poses.empty()) {
-      throw fl::FaceLightError("--head-pose tracker: no face found on any training subject");
+      std::string list;
+      for (int s : trained) list += (list.empty() ? "" : ",") + std::to_string(s);
+      throw fl::FaceLightError("--head-pose tracker: no face found on any training subject (" +
+                               list + ") in '" + train_dir + "'" +
+                               (train_yaleb.empty()
+                                    ? ": give the Yale B folder they are in with --train-yaleb DIR"
+                                    : ": expected yaleBNN/yaleBNN_P00A+000E+00.pgm images there"));
     }
     const std::array<double, 9> mean = MeanRotation(training_poses);
     for (int s : subjects) {
