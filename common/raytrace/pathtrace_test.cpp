@@ -371,6 +371,8 @@ TEST(PathTrace, ExposureScalesAndProgressReports) {
 
 TEST(PathTrace, InvalidInputsThrowPreciseErrors) {
   Scene scene;
+  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, TestCamera(8, 8), PathTraceOptions{}); }),
+            "PathTrace: scene not committed");
   scene.Commit();
   const Camera camera = TestCamera(8, 8);
   PathTraceOptions options;
@@ -404,11 +406,20 @@ TEST(PathTrace, InvalidInputsThrowPreciseErrors) {
               scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
             }),
             "Scene::AddObject: Material::specular_f0 must be in [0, 1], got 2");
+  m.specular_f0 = 0.5f;
+  m.emission = {-1, 0, 0};
+  EXPECT_EQ(ErrorOf([&] {
+              scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
+            }),
+            "Scene::AddObject: Material::emission must be >= 0");
   AreaLight l;
   l.half_v = {0, 0, 0};
   scene.area_lights().push_back(l);
   EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, PathTraceOptions{}); }),
             "PathTrace: area light 0: half_u and half_v must span a non-zero area");
+  scene.area_lights()[0] = AreaLight{.shape = AreaLight::Shape::kSphere, .radius = 0};
+  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, PathTraceOptions{}); }),
+            "PathTrace: area light 0: radius must be > 0, got 0");
   EXPECT_EQ(ErrorOf([] { BlackbodyRgb(500); }),
             "BlackbodyRgb: kelvin must be in [1000, 40000], got 500");
 }
