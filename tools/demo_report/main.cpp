@@ -73,7 +73,8 @@ std::vector<std::string> Split(const std::string& text, char separator) {
   return parts;
 }
 
-// One panel: two series (truth green, estimate red) against time.
+// One panel: two series (truth green, estimate red) against time. The title has its own band
+// above the plot (the top grid line's label used to overlap it).
 void DrawPanel(cv::Mat& image, cv::Rect area, const std::string& title,
                const std::vector<double>& t, const std::vector<double>& truth,
                const std::vector<double>& estimate, double lo, double hi) {
@@ -87,7 +88,7 @@ void DrawPanel(cv::Mat& image, cv::Rect area, const std::string& title,
     const double u = (x - t0) / (t1 - t0);
     const double v = (std::clamp(y, lo, hi) - lo) / (hi - lo);
     return cv::Point(area.x + 4 + static_cast<int>(u * (area.width - 8)),
-                     area.y + area.height - 4 - static_cast<int>(v * (area.height - 24)));
+                     area.y + area.height - 4 - static_cast<int>(v * (area.height - 34)));
   };
   for (double grid : {lo, 0.0, hi}) {
     cv::line(image, point(t0, grid), point(t1, grid), cv::Scalar(230, 230, 230));
