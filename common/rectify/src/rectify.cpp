@@ -157,34 +157,46 @@ struct Rectifier::Impl {
 
   template <typename T>
   void ResampleDepth(const std::byte* src, size_t src_step, std::byte* dst) const {
+    if (options.depth_interpolation == DepthInterpolation::kEdgeAware) {
+      ResampleDepthAs<T, true>(src, src_step, dst);
+    } else {
+      ResampleDepthAs<T, false>(src, src_step, dst);
+    }
+  }
+
+  // One loop per mode and type: the per-pixel work is a few loads, so branches and libm calls
+  // would dominate (lround cost more than the rest of the edge-aware sample).
+  template <typename T, bool kEdgeAware>
+  void ResampleDepthAs(const std::byte* src, size_t src_step, std::byte* dst) const {
     const uint32_t w = calibration.width, h = calibration.height;
     // msgs::Image::Validate guarantees a step that is a multiple of the channel size.
     const T* base = reinterpret_cast<const T*>(src);
     const size_t stride = src_step / sizeof(T);
-    const auto at = [&](std::array<int16_t, 2> p, int dx, int dy) {
-      return base[static_cast<size_t>(p[1] + dy) * stride + static_cast<size_t>(p[0] + dx)];
-    };
-    const bool edge_aware = options.depth_interpolation == DepthInterpolation::kEdgeAware;
     const float tolerance = static_cast<float>(options.depth_edge_tolerance);
     T* out = reinterpret_cast<T*>(dst);
-    for (size_t i = 0; i < static_cast<size_t>(w) * h; ++i) {
+    const size_t count = static_cast<size_t>(w) * h;
+    for (size_t i = 0; i < count; ++i) {
       const std::array<int16_t, 2> n = nearest[i];
-      T value = n[0] < 0 ? T{0} : at(n, 0, 0);
-      if (edge_aware && corner[i][0] >= 0) {
+      T value = n[0] < 0 ? T{0} : base[static_cast<size_t>(n[1]) * stride + n[0]];
+      if constexpr (kEdgeAware) {
         const std::array<int16_t, 2> c = corner[i];
-        const T d00 = at(c, 0, 0), d01 = at(c, 1, 0), d10 = at(c, 0, 1), d11 = at(c, 1, 1);
-        if (ValidDepth(d00) && ValidDepth(d01) && ValidDepth(d10) && ValidDepth(d11)) {
-          const float lo = static_cast<float>(std::min({d00, d01, d10, d11}));
-          const float hi = static_cast<float>(std::max({d00, d01, d10, d11}));
-          if (hi - lo <= tolerance * lo) {
-            const auto [fx, fy] = fraction[i];
-            const float top = static_cast<float>(d00) * (1 - fx) + static_cast<float>(d01) * fx;
-            const float bottom = static_cast<float>(d10) * (1 - fx) + static_cast<float>(d11) * fx;
-            const float v = top * (1 - fy) + bottom * fy;
-            if constexpr (std::is_same_v<T, uint16_t>) {
-              value = static_cast<uint16_t>(std::lround(v));
-            } else {
-              value = v;
+        if (c[0] >= 0) {
+          const T* r0 = base + static_cast<size_t>(c[1]) * stride + c[0];
+          const T* r1 = r0 + stride;
+          const T d00 = r0[0], d01 = r0[1], d10 = r1[0], d11 = r1[1];
+          if (ValidDepth(d00) && ValidDepth(d01) && ValidDepth(d10) && ValidDepth(d11)) {
+            const float lo = static_cast<float>(std::min(std::min(d00, d01), std::min(d10, d11)));
+            const float hi = static_cast<float>(std::max(std::max(d00, d01), std::max(d10, d11)));
+            if (hi - lo <= tolerance * lo) {
+              const auto [fx, fy] = fraction[i];
+              const float top = static_cast<float>(d00) + fx * static_cast<float>(d01 - d00);
+              const float bottom = static_cast<float>(d10) + fx * static_cast<float>(d11 - d10);
+              const float v = top + fy * (bottom - top);
+              if constexpr (std::is_same_v<T, uint16_t>) {
+                value = static_cast<uint16_t>(v + 0.5f);  // v > 0: rounds to nearest
+              } else {
+                value = v;
+              }
             }
           }
         }
