@@ -1,11 +1,13 @@
 #include "probeless/raytrace/pathtrace.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <numbers>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "bsdf.h"
@@ -65,13 +67,20 @@ uint64_t PathSeed(uint64_t seed, uint64_t frame_index, uint64_t a, uint64_t b, u
 // SplitMix64 stream of one path.
 struct Rng {
   uint64_t state = 0;
-  float Next() {
+  uint64_t Bits() {
     state += 0x9E3779B97F4A7C15ull;
     uint64_t z = state;
     z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    z ^= z >> 31;
-    return static_cast<float>(z >> 40) * (1.0f / 16777216.0f);
+    return z ^ (z >> 31);
+  }
+  // One uniform in [0, 1) (24 bits).
+  float Next() { return static_cast<float>(Bits() >> 40) * (1.0f / 16777216.0f); }
+  // Two uniforms in [0, 1) from one draw (24 bits each): half the hashing per dimension.
+  void Next2(float* a, float* b) {
+    const uint64_t z = Bits();
+    *a = static_cast<float>(z >> 40) * (1.0f / 16777216.0f);
+    *b = static_cast<float>((z >> 8) & 0xFFFFFF) * (1.0f / 16777216.0f);
   }
 };
 
@@ -240,12 +249,12 @@ float Importance(const Light& l, Vec3 p, Vec3 n) {
     }
     case Light::Kind::kRectangle: {
       const Vec3 to = l.position - p;
-      const float d2 = Dot(to, to);
-      const float d = std::sqrt(d2);
       const float side = -Dot(to, l.normal);  // > 0: p is on the emitting side
-      if (!(side > 0) || !(d > 0)) return 0;
-      const float horizon = std::clamp((Dot(to, n) + l.radius) / d, 0.0f, 1.0f);
-      const float cos_l = std::max(side / d, 0.1f);
+      if (!(side > 0)) return 0;
+      const float d2 = Dot(to, to);
+      const float inv_d = 1 / std::sqrt(d2);
+      const float horizon = std::clamp((Dot(to, n) + l.radius) * inv_d, 0.0f, 1.0f);
+      const float cos_l = std::max(side * inv_d, 0.1f);
       return l.luminance * l.area * cos_l * horizon / std::max(d2, l.area);
     }
     case Light::Kind::kSphere: {
@@ -253,9 +262,8 @@ float Importance(const Light& l, Vec3 p, Vec3 n) {
       const float d2 = Dot(to, to);
       const float r2 = l.radius * l.radius;
       if (!(d2 > r2)) return 0;  // inside: only the unlit back faces are visible
-      const float d = std::sqrt(d2);
-      const float horizon = std::clamp((Dot(to, n) + l.radius) / d, 0.0f, 1.0f);
-      return l.luminance * kPi * r2 * horizon / std::max(d2, r2);
+      const float horizon = std::clamp((Dot(to, n) + l.radius) / std::sqrt(d2), 0.0f, 1.0f);
+      return l.luminance * kPi * r2 * horizon / d2;
     }
   }
   return 0;
@@ -493,8 +501,8 @@ class Tracer {
     const internal::Bsdf bsdf(s.albedo, m.specular_f0, m.roughness, n, wo);
     const Vec3 origin = s.position + s.geometric_normal * options_.ray_epsilon;
     // A fixed count of uniforms per vertex keeps the stream's dimensions aligned between paths.
-    float u[7];
-    for (float& x : u) x = p.rng.Next();
+    float u[8];
+    for (int k = 0; k < 8; k += 2) p.rng.Next2(&u[k], &u[k + 1]);
     float light_sum = 0;
     for (size_t i = 0; i < lights_.size(); ++i) {
       importance_[i] = Importance(lights_[i], origin, n);
@@ -652,16 +660,16 @@ class Tracer {
   std::vector<RTCRay>& shadow_rays_;
 };
 
-// Runs fn(task) for every task on `pool`, in groups so that `progress` can report from the
-// calling thread between groups.
+// Runs fn(task) for every task on `pool` in one dynamic ParallelFor (no barriers between groups:
+// they would idle a thread on every uneven group); `on_caller` runs on the calling thread after
+// each of its own tasks.
 void RunTasks(size_t tasks, ThreadPool* pool, const std::function<void(size_t)>& fn,
-              const std::function<void(size_t done)>& after_group) {
-  const size_t group = pool != nullptr ? static_cast<size_t>(4 * pool->thread_count()) : 4;
-  for (size_t begin = 0; begin < tasks; begin += group) {
-    const size_t count = std::min(group, tasks - begin);
-    parallel::ParallelFor(pool, count, [&](size_t i) { fn(begin + i); });
-    if (after_group) after_group(begin + count);
-  }
+              const std::function<void()>& on_caller) {
+  const std::thread::id caller = std::this_thread::get_id();
+  parallel::ParallelFor(pool, tasks, [&](size_t t) {
+    fn(t);
+    if (on_caller && std::this_thread::get_id() == caller) on_caller();
+  });
 }
 
 }  // namespace
@@ -783,8 +791,10 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
           for (int x = 0; x < camera.width; ++x) {
             Rng rng{PathSeed(options.seed, options.frame_index, static_cast<uint64_t>(x),
                              static_cast<uint64_t>(y), static_cast<uint64_t>(s))};
-            const float jx = rng.Next() - 0.5f;
-            const float jy = rng.Next() - 0.5f;
+            float jx, jy;
+            rng.Next2(&jx, &jy);
+            jx -= 0.5f;
+            jy -= 0.5f;
             const Vec3 d_cam{static_cast<float>((x + jx - camera.cx) / camera.fx),
                              static_cast<float>((y + jy - camera.cy) / camera.fy), 1.0f};
             start.push_back(Ray{eye, Normalize(rot * d_cam), 0, 1e30f});
@@ -805,13 +815,24 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
     }
     rays_per_task[t] = traced;
   };
-  std::function<void(size_t)> after;
+  std::atomic<int> rows_done{0};
+  int reported = 0;
+  std::function<void()> report;
   if (options.progress) {
-    after = [&](size_t done) {
-      options.progress(std::min(camera.height, static_cast<int>(done) * rows), camera.height);
+    report = [&] {
+      const int done = rows_done.load();
+      if (done > reported) options.progress(reported = done, camera.height);
     };
   }
-  RunTasks(tasks, pool, task, after);
+  RunTasks(
+      tasks, pool,
+      [&](size_t t) {
+        task(t);
+        rows_done +=
+            std::min(camera.height, (static_cast<int>(t) + 1) * rows) - static_cast<int>(t) * rows;
+      },
+      report);
+  if (report) report();  // the rows the other threads finished last
   for (uint64_t r : rays_per_task) frame.rays += r;
   return frame;
 }

@@ -28,7 +28,8 @@ struct PathTraceOptions {
   // Next-event estimation of every light at every vertex (one shadow ray each) instead of one
   // light chosen by its unshadowed contribution: less noise per path, more rays per path.
   bool all_lights = false;
-  // Called from the calling thread after groups of rows, (done_rows, total_rows); may be null.
+  // Called from the calling thread, after each tile it renders and at the end, with the rows
+  // finished so far (increasing, the last call (total_rows, total_rows)); may be null.
   std::function<void(int done_rows, int total_rows)> progress;
 
   // Throws RaytraceError naming the first invalid field, e.g.
