@@ -850,15 +850,48 @@ GeneratedSceneSummary WriteGeneratedScene(const GeneratedScene& scene,
   }
   pt.exposure = static_cast<float>(summary.exposure);
 
-  // The light probe at the insertions (without them): the oracle's light, in image units.
+  // The light probe at the insertions (without them): the oracle's light, in image units. (Area
+  // lamps are hit by its rays; they block no shadow ray of this occlusion query.)
   Vec3 probe_point;
   for (const InsertionObject& o : scene.insertions) probe_point += o.position;
   probe_point = probe_point / static_cast<float>(scene.insertions.size());
   raytrace::PathTraceOptions probe = pt;
   probe.samples_per_pixel = 1;
+  // Delta lights are never hit by the probe's rays: the suns become delta lights for it (their
+  // disc would be a rare, huge spike) and their direct light, like the point lamps', is added
+  // analytically where the probe sees them; their bounce light comes from the traced paths.
   // (IncidentRadianceSh applies probe.exposure.)
-  const std::array<Vec3, 9> probe_sh =
+  for (auto& l : plain.directional_lights()) l.angular_radius = 0;
+  std::array<Vec3, 9> probe_sh =
       raytrace::IncidentRadianceSh(plain, probe_point, options.probe_directions, probe, &pool);
+  plain.directional_lights() = scene.suns;
+  {
+    std::vector<raytrace::Ray> rays;
+    std::vector<Vec3> direct;  // irradiance of each delta light at the probe, exposure applied
+    std::vector<Vec3> towards;
+    for (const raytrace::DirectionalLight& l : scene.suns) {
+      if (!l.enabled) continue;
+      rays.push_back({probe_point, l.direction, 1e-3f, 1e30f});
+      direct.push_back(l.irradiance);
+      towards.push_back(l.direction);
+    }
+    for (const raytrace::PointLight& l : scene.point_lights) {
+      if (!l.enabled) continue;
+      const Vec3 d = l.position - probe_point;
+      rays.push_back({probe_point, d, 1e-3f, 1 - 1e-3f});
+      direct.push_back(l.intensity / Dot(d, d));
+      towards.push_back(Normalize(d));
+    }
+    std::vector<uint8_t> visible(rays.size());
+    plain.Occluded(rays, visible, &pool);
+    for (size_t k = 0; k < rays.size(); ++k) {
+      if (!visible[k]) continue;
+      const std::array<float, 9> y = raytrace::ShBasis9(towards[k]);
+      for (int c = 0; c < 9; ++c) {
+        probe_sh[c] += direct[k] * (y[c] * static_cast<float>(summary.exposure));
+      }
+    }
+  }
 
   // The dominant light at the probe: the sun, or the lamp of largest irradiance there.
   struct Dominant {

@@ -73,11 +73,11 @@ struct GeneratedScene {
 };
 
 struct GenerateOptions {
-  int frames = 5;               // frames per scene (>= 1; hand-held motion at 30 fps)
-  int samples_per_pixel = 8;    // paths per pixel of rgb/ and rgb_inserted/ (>= 1), denoised
-  int bounces = 3;              // path-tracing bounces (>= 0)
-  int probe_directions = 2048;  // paths of the light probe at the insertion (sh_camera)
-  int ratio_samples = 2;        // paths per pixel of the dominant-light-only render
+  int frames = 5;                // frames per scene (>= 1; hand-held motion at 30 fps)
+  int samples_per_pixel = 8;     // paths per pixel of rgb/ and rgb_inserted/ (>= 1), denoised
+  int bounces = 3;               // path-tracing bounces (>= 0)
+  int probe_directions = 16384;  // paths of the light probe at the insertion (sh_camera)
+  int ratio_samples = 2;         // paths per pixel of the dominant-light-only render
   // Edge-avoiding a-trous denoising of rgb/ and rgb_inserted/ guided by first-hit albedo, normal
   // and depth (Dammertz et al. 2010, SVGF's variance weight), so that few paths per pixel leave
   // the noise of a camera rather than of a path tracer.
