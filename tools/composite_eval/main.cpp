@@ -542,10 +542,12 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
 }
 
 void WriteJson(const std::string& path, const Options& options,
-               const std::vector<SceneResult>& results) {
+               const std::vector<SceneResult>& results, const std::vector<std::string>& failed) {
   std::ostringstream j;
   j << "{\n  \"tool\": \"composite_eval\",\n  \"mode\": " << Quote(options.mode) << ",\n";
-  j << "  \"scenes\": [\n";
+  j << "  \"failed_scenes\": [";
+  for (size_t f = 0; f < failed.size(); ++f) j << (f ? ", " : "") << Quote(failed[f]);
+  j << "],\n  \"scenes\": [\n";
   for (size_t s = 0; s < results.size(); ++s) {
     const SceneResult& r = results[s];
     j << "    {\"name\": " << Quote(r.name) << ", \"frames\": " << r.frames;
@@ -637,37 +639,52 @@ int Run(int argc, char** argv) {
   action.sa_handler = OnSignal;
   ::sigaction(SIGINT, &action, nullptr);
   ::sigaction(SIGTERM, &action, nullptr);
-  try {
-    for (size_t k = 0; k < scenes.size(); ++k) {
-      if (composite_eval::StopRequested()) throw Interrupted();
+  // A scene that fails is reported and skipped: the other scenes' results are still written.
+  std::vector<std::string> failed;
+  bool keep_work = false;
+  for (size_t k = 0; k < scenes.size(); ++k) {
+    if (composite_eval::StopRequested()) {
+      std::cerr << "composite_eval: interrupted\n";
+      fs::remove_all(work);
+      return 130;
+    }
+    try {
       results.push_back(
           EvaluateScene(scenes[k], k, scenes.size(), options, work, bin_dir, launch_file));
+    } catch (const Interrupted&) {
+      std::cerr << "composite_eval: interrupted\n";
+      fs::remove_all(work);
+      return 130;
+    } catch (const eval::EvalError& e) {
+      std::cerr << "composite_eval: " << e.what() << "\n";
+      failed.push_back(e.what());
+      exit_code = std::max(exit_code, 2);
+    } catch (const dataset::DatasetError& e) {
+      std::cerr << "composite_eval: " << e.what() << "\n";
+      failed.push_back(e.what());
+      exit_code = std::max(exit_code, 2);
+    } catch (const rectify::RectifyError& e) {
+      std::cerr << "composite_eval: " << e.what() << "\n";
+      failed.push_back(e.what());
+      exit_code = std::max(exit_code, 2);
+    } catch (const std::exception& e) {
+      std::cerr << "composite_eval: " << e.what() << " (work folder kept: " << work.string()
+                << ")\n";
+      failed.push_back(e.what());
+      exit_code = exit_code == 0 ? 1 : exit_code;
+      keep_work = true;
     }
-  } catch (const Interrupted&) {
-    std::cerr << "composite_eval: interrupted\n";
-    fs::remove_all(work);
-    return 130;
-  } catch (const eval::EvalError& e) {
-    std::cerr << "composite_eval: " << e.what() << "\n";
-    exit_code = 2;
-  } catch (const dataset::DatasetError& e) {
-    std::cerr << "composite_eval: " << e.what() << "\n";
-    exit_code = 2;
-  } catch (const rectify::RectifyError& e) {
-    std::cerr << "composite_eval: " << e.what() << "\n";
-    exit_code = 2;
-  } catch (const std::exception& e) {
-    std::cerr << "composite_eval: " << e.what() << " (work folder kept: " << work.string() << ")\n";
-    return 1;
   }
-  if (exit_code != 0) {
-    fs::remove_all(work);
+  if (results.empty()) {
+    if (!keep_work) fs::remove_all(work);
     return exit_code;
   }
-  WriteJson(options.json, options, results);
-  fs::remove_all(work);
-  std::cerr << "composite_eval: " << results.size() << " scenes -> " << options.json << "\n";
-  return 0;
+  WriteJson(options.json, options, results, failed);
+  if (!keep_work) fs::remove_all(work);
+  std::cerr << "composite_eval: " << results.size() << " scenes -> " << options.json;
+  if (!failed.empty()) std::cerr << " (" << failed.size() << " failed, listed in the JSON)";
+  std::cerr << "\n";
+  return exit_code;
 }
 
 }  // namespace
