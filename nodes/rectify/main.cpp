@@ -7,7 +7,8 @@
 // new camera matrix; ROS's P = [K | 0] with the default alpha). Maps are computed once per
 // calibration, again only when camera_info changes. A camera without distortion passes through
 // (one copy into the slot, no resampling). Frames that arrive before the first camera_info wait
-// (the latest of each stream) until it comes.
+// (the latest of each stream) until it comes; after 30 frames without any, frames pass through
+// unrectified (with a warning) so that a log without camera_info does not stall its consumers.
 //
 // Params: alpha (-1: keep the calibrated K; 0..1 OpenCV free scaling), depth_interpolation
 // (nearest | edge_aware), depth_edge_tolerance (0.03, fraction of the depth), threads (1: OpenCV
@@ -16,6 +17,7 @@
 #include "probeless/node/main.h"
 
 #include <chrono>
+#include <cstring>
 #include <optional>
 #include <string>
 
@@ -76,6 +78,7 @@ int Run(int argc, char** argv) {
   double total_ms = 0;
   uint64_t timed = 0;
 
+  // Publishes `sample` rectified, or copied unchanged when there is no calibration at all.
   auto rectify_frame = [&](bus::Sample& sample, const std::string& in_topic, Output& out) {
     const auto in = msgs::ReadMessage<msgs::Image>(sample.data());
     if (msgs::BytesPerPixel(in->encoding) == 0) {
@@ -92,7 +95,17 @@ int Run(int argc, char** argv) {
     const auto t0 = std::chrono::steady_clock::now();
     bus::Loan loan = out.publisher->Borrow(bytes);
     msgs::WriteView<msgs::Image> view = msgs::WriteMessage<msgs::Image>(loan.data());
-    rectifier->Rectify(*in, in.payload, *view, view.payload, in_topic);
+    if (rectifier) {
+      rectifier->Rectify(*in, in.payload, *view, view.payload, in_topic);
+    } else {
+      in->Validate(in.payload.size());
+      view->Init(in->width, in->height, in->encoding);
+      view->header = in->header;
+      for (uint32_t y = 0; y < in->height; ++y) {
+        std::memcpy(view.payload.data() + static_cast<size_t>(y) * view->step,
+                    in.payload.data() + static_cast<size_t>(y) * in->step, view->step);
+      }
+    }
     out.publisher->Publish(std::move(loan));
     total_ms +=
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -127,13 +140,22 @@ int Run(int argc, char** argv) {
     waiting_image.reset();
     waiting_depth.reset();
   };
+  // A stream without any camera_info (a log recorded without it) must not stall its consumers:
+  // after this many frames they are passed through unrectified (nothing to undistort with).
+  constexpr uint64_t kFramesWithoutInfo = 30;
+  uint64_t frames_without_info = 0;
   auto on_frame = [&](const std::string& topic, Output& out, std::optional<bus::Sample>& waiting) {
     return [&, topic](bus::Sample&& sample) {
-      if (!rectifier) {
+      if (!rectifier && ++frames_without_info <= kFramesWithoutInfo) {
         if (!waiting) node.Info() << topic << ": waiting for " << info_topic;
         waiting = std::move(sample);  // the bus slot is held, not copied
         return;
       }
+      if (!rectifier && frames_without_info == kFramesWithoutInfo + 1) {
+        node.Warn() << "no " << info_topic << " after " << kFramesWithoutInfo
+                    << " frames: passing frames through unrectified until one comes";
+      }
+      waiting.reset();
       rectify_frame(sample, topic, out);
     };
   };

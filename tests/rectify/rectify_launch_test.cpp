@@ -266,5 +266,43 @@ TEST(RectifyLaunch, MalformedCameraInfoStopsTheNodeWithOneLineNamingTheTopic) {
   std::system((kBin + "/probeless clean > /dev/null 2>&1").c_str());
 }
 
+// A stream without camera_info: the first 30 frames wait for one, then frames pass through
+// unrectified (a log recorded without camera_info must not stall the face tracker behind rectify).
+TEST(RectifyLaunch, FramesPassThroughWhenNoCameraInfoEverComes) {
+  Process node("rectify", {"--ros-args", "-r", "image:=/rect_none/image", "-r",
+                           "image_rect:=/rect_none/image_rect", "-r", "__node:=rectify_none"});
+  bus::Publisher image(
+      "/rect_none/image", msgs::TopicTypeOf<msgs::Image>(),
+      {.max_message_bytes = msgs::Image::MessageBytesFor(64, 48, msgs::Encoding::kMono8)});
+  bus::Subscriber rect("/rect_none/image_rect", msgs::TopicTypeOf<msgs::Image>(),
+                       {.queue_depth = 64});
+  for (int i = 0; i < 400 && image.SubscriberCount() == 0; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  for (int i = 0; i < 40; ++i) {
+    bus::Loan loan = image.Borrow(msgs::Image::MessageBytesFor(64, 48, msgs::Encoding::kMono8));
+    auto out = msgs::WriteMessage<msgs::Image>(loan.data());
+    out->Init(64, 48, msgs::Encoding::kMono8);
+    out->header.stamp_ns = i;
+    std::memset(out.payload.data(), i, 64 * 48);
+    image.Publish(std::move(loan));
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::vector<int64_t> stamps;
+  for (int tries = 0; tries < 100 && stamps.size() < 10; ++tries) {
+    while (auto sample = rect.Take(std::chrono::milliseconds(20))) {
+      const auto m = msgs::ReadMessage<msgs::Image>(sample->data());
+      EXPECT_EQ(static_cast<int>(m.payload[0]), static_cast<int>(m->header.stamp_ns));
+      stamps.push_back(m->header.stamp_ns);
+    }
+  }
+  node.Signal(SIGINT);
+  EXPECT_EQ(node.Wait(), 0) << node.Err();
+  EXPECT_EQ(stamps, (std::vector<int64_t>{30, 31, 32, 33, 34, 35, 36, 37, 38, 39})) << node.Err();
+  EXPECT_NE(node.Err().find("no /camera_info after 30 frames: passing frames through unrectified"),
+            std::string::npos)
+      << node.Err();
+}
+
 }  // namespace
 }  // namespace probeless
