@@ -10,7 +10,7 @@ namespace {
 
 constexpr float kPi = static_cast<float>(std::numbers::pi);
 constexpr int kTableSize = 32;          // nodes along mu and along roughness
-constexpr int kTableStrata = 48;        // stratified VNDF samples per axis per table node
+constexpr int kTableStrata = 32;        // stratified VNDF samples per axis per table node
 constexpr float kMinMu = 1e-3f;         // the mu = 0 node is evaluated here (VNDF needs mu > 0)
 constexpr float kMinRoughness = 0.01f;  // the r = 0 node (roughness must be > 0 in materials)
 
@@ -108,7 +108,7 @@ struct AlbedoTables {
 };
 
 const AlbedoTables& Tables() {
-  static const AlbedoTables tables;  // built once (thread-safe static), ~15 ms
+  static const AlbedoTables tables;  // built once (thread-safe static), ~50 ms
   return tables;
 }
 
