@@ -11,14 +11,24 @@
 // transfer of the scene-light node, both or neither).
 // Publishes render/composite (Image rgb8, the camera image's header).
 //
+// Scene mode with shadows (the default): every composite rasterises the objects into the latest G_r
+// (-> G_r'), computes the SSDO transfer of both buffers in the objects' window and applies Gruber
+// eq. 13-15 to the camera image (render/differential.h), so the objects shadow whatever real
+// surface fusion reconstructed and tint it by their bounce light; shadow_source mesh keeps the
+// older receiver from scene_mesh instead.
+//
 // Params: mode (face | scene), objects (list: nose, cap, glasses, *.prt, *.obj, *.ply),
 // object_scale (1: scale about each object's bounding-box centre), object_position ([] = as
 // modelled, else [x, y, z] m in the anchor frame, where that centre goes; scene mode: the world
 // frame of scene/pose), scene_mesh, shadows (bool: virtual shadows on the proxy head / scene mesh),
 // samples, bands, backend (offscreen | window), trigger (light | image: what starts a frame), tone
 // (clamp | reinhard), exposure, white, video (file), video_fps, png_dir, max_frames (0 =
-// unlimited). Exit: 0 on shutdown or after max_frames, 2 on bad params or content, 1 when the
-// window back-end's X display goes away (one line on stderr).
+// unlimited), shadow_source (gbuffer | mesh), ssdo_radius, ssdo_directions, ssdo_bands, ssdo_seed,
+// ssdo_threads, differential_step, differential_tone (fixed | key), differential_key, indirect,
+// object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there). Exit: 0 on
+// shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's X display
+// goes away (one line on stderr).
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -32,14 +42,39 @@
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 #include "probeless/render/content.h"
+#include "probeless/render/differential.h"
 #include "probeless/render/msgs_io.h"
 #include "probeless/render/output.h"
 #include "probeless/render/renderer.h"
 #include "probeless/render/viewer.h"
+#include "probeless/sh/sh.h"
 
 namespace {
 
 using namespace probeless;
+
+// The dominant light of eq. 10 from a light message: its own direction and intensity, else
+// Sloan's optimal linear direction of the mean colour and sh::DirectionalPower along it.
+light::DominantLight DominantOf(const msgs::ShLight& m) {
+  light::DominantLight d;
+  const float* md = m.dominant_direction;
+  if (m.intensity > 0 && md[0] * md[0] + md[1] * md[1] + md[2] * md[2] > 0.5f) {
+    d.direction = {md[0], md[1], md[2]};
+    d.intensity = m.intensity;
+    return d;
+  }
+  if (m.bands < 2) return d;
+  std::vector<double> grey(m.bands * m.bands);
+  for (size_t k = 0; k < grey.size(); ++k) {
+    grey[k] = (m.coefficients[k][0] + m.coefficients[k][1] + m.coefficients[k][2]) / 3.0;
+  }
+  const sh::Vec3 dir = sh::OptimalLinearDirection(grey.data());
+  if (dir[0] == 0 && dir[1] == 0 && dir[2] == 0) return d;
+  d.direction = {static_cast<float>(dir[0]), static_cast<float>(dir[1]),
+                 static_cast<float>(dir[2])};
+  d.intensity = static_cast<float>(std::max(0.0, sh::DirectionalPower(grey, dir)));
+  return d;
+}
 
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "renderer");
@@ -60,7 +95,39 @@ int Run(int argc, char** argv) {
     content_options.object_position = {position[0], position[1], position[2]};
   }
   content_options.scene_mesh = node.Param("scene_mesh", "");
-  content_options.receiver = node.Param("shadows", true);
+  const bool shadows = node.Param("shadows", true);
+  const std::string shadow_source = node.Param("shadow_source", "gbuffer");
+  if (shadow_source != "gbuffer" && shadow_source != "mesh") {
+    throw render::RenderError("param shadow_source: expected gbuffer or mesh, got '" +
+                              shadow_source + "'");
+  }
+  // Scene mode: the objects' shadows and bounce light from G_r (no receiver mesh; scene_mesh then
+  // only occludes the bake), unless shadow_source mesh asks for the receiver.
+  const bool gbuffer_differential = shadows && mode == "scene" && shadow_source == "gbuffer";
+  content_options.receiver = shadows && !gbuffer_differential;
+  render::DifferentialOptions diff_options;
+  diff_options.transfer.radius_m = static_cast<float>(node.Param("ssdo_radius", 0.3));
+  diff_options.transfer.max_occluder_distance_m = 2 * diff_options.transfer.radius_m;
+  diff_options.transfer.directions = node.Param("ssdo_directions", 32);
+  diff_options.transfer.bands = node.Param("ssdo_bands", 4);
+  diff_options.transfer.seed = static_cast<uint64_t>(node.Param<int64_t>("ssdo_seed", 1));
+  diff_options.transfer.threads = node.Param("ssdo_threads", 2);
+  diff_options.step = node.Param("differential_step", 1);
+  const std::string diff_tone = node.Param("differential_tone", "fixed");
+  if (diff_tone != "fixed" && diff_tone != "key" && diff_tone != "ratio") {
+    throw render::RenderError("param differential_tone: expected fixed, key or ratio, got '" +
+                              diff_tone + "'");
+  }
+  diff_options.tone = diff_tone == "key"     ? render::DifferentialTone::kAverageKey
+                      : diff_tone == "ratio" ? render::DifferentialTone::kRatio
+                                             : render::DifferentialTone::kFixed;
+  diff_options.key = static_cast<float>(node.Param("differential_key", 0.18));
+  diff_options.indirect = node.Param("indirect", true);
+  const std::vector<double> object_pixel = node.Param("object_pixel", std::vector<double>{});
+  if (!object_pixel.empty() && (object_pixel.size() != 2 || mode != "scene")) {
+    throw render::RenderError("param object_pixel: expected [u, v] (pixels) in scene mode, got " +
+                              std::to_string(object_pixel.size()) + " values in " + mode + " mode");
+  }
   content_options.bake.samples = node.Param("samples", 256);
   content_options.bake.bands = node.Param("bands", 3);
   const render::Backend backend = render::BackendFromName(node.Param("backend", "offscreen"));
@@ -86,6 +153,8 @@ int Run(int argc, char** argv) {
   const auto load_start = std::chrono::steady_clock::now();
   const render::Content content = render::LoadContent(content_options);
   render::Renderer renderer(renderer_options);
+  std::optional<render::DifferentialRenderer> differential;
+  if (gbuffer_differential) differential.emplace(diff_options);  // throws for bad options
   for (size_t i = 0; i < content.objects.size(); ++i) renderer.AddObject(content.objects[i]);
   if (content.receiver) renderer.AddReceiver(*content.receiver);
   node.Info()
@@ -119,7 +188,17 @@ int Run(int argc, char** argv) {
   msgs::FaceObservation face;
   bool have_face = false;
   raytrace::Transform camera_to_world;
-  std::vector<float> real_depth, transfer_real, transfer_virtual;
+  std::vector<float> real_depth, real_normals, transfer_real, transfer_virtual;
+  std::vector<uint8_t> real_colour, camera_diff;
+  msgs::ShLight light_msg;
+  // The objects' placement (object_pixel moves them once, at the first frame with G_r).
+  std::vector<raytrace::Transform> placement(content.objects.size());
+  bool placed = object_pixel.empty();
+  render::VirtualGeometry with_virtual;
+  render::DifferentialResult diff_result;
+  double diff_ms_sum = 0, diff_changed_sum = 0;
+  int64_t diff_frames = 0;
+  bool warned_size = false, warned_hit = false;
   int transfer_count = 0;
   render::Composite composite;
   render::ViewerState viewer;
@@ -137,6 +216,68 @@ int Run(int argc, char** argv) {
     if (in.face_valid) in.face_to_camera = render::TransformFromMsg(face.head_pose);
     in.camera_to_world = camera_to_world;
     if (real_depth.size() == camera_rgb.size() / 3) in.real_depth = real_depth;
+    const bool have_gbuffer =
+        real_depth.size() == camera_rgb.size() / 3 && real_normals.size() == 3 * real_depth.size();
+    if (!placed && have_gbuffer) {
+      // object_pixel: an ARKit-style hit test on the reconstruction (render/differential.h).
+      const light::Intrinsics k{in.camera.fx, in.camera.fy, in.camera.cx, in.camera.cy};
+      const light::GeometryView g{width, height, k, real_depth, real_normals, {}};
+      std::vector<const raytrace::Mesh*> meshes;
+      for (const auto& o : content.objects) meshes.push_back(&o.mesh.mesh);
+      const auto hit =
+          render::PlaceOnSurface(g, object_pixel[0], object_pixel[1], in.camera_to_world, meshes);
+      if (hit) {
+        for (size_t i = 0; i < placement.size(); ++i) {
+          placement[i] = *hit;
+          renderer.SetObjectPlacement(static_cast<int>(i), *hit);
+        }
+        node.Info() << "object_pixel [" << object_pixel[0] << ", " << object_pixel[1]
+                    << "]: objects moved by (" << hit->translation[0] << ", " << hit->translation[1]
+                    << ", " << hit->translation[2] << ") m, world frame";
+        placed = true;
+      } else if (!warned_hit) {
+        node.Warn() << "object_pixel: no reconstructed surface at that pixel yet";
+        warned_hit = true;
+      }
+    }
+    if (differential && placed && have_gbuffer) {
+      // Gruber §5.4 from the reconstruction: G_r' -> R_d, R'_d (R_i, R'_i) -> eq. 13-15.
+      const light::Intrinsics k{in.camera.fx, in.camera.fy, in.camera.cx, in.camera.cy};
+      const std::span<const uint8_t> colour = real_colour.size() == 3 * real_depth.size()
+                                                  ? std::span<const uint8_t>(real_colour)
+                                                  : std::span<const uint8_t>();
+      const light::GeometryView g{width, height, k, real_depth, real_normals, colour};
+      const raytrace::Transform world_to_camera = in.camera_to_world.Inverse();
+      std::vector<render::RasterObject> raster;
+      for (size_t i = 0; i < content.objects.size(); ++i) {
+        const render::VirtualObject& o = content.objects[i];
+        raster.push_back({&o.mesh.mesh, world_to_camera * placement[i] * o.object_to_anchor,
+                          o.albedo, o.cull_back_faces});
+      }
+      render::RasteriseObjects(g, raster, &with_virtual);
+      render::DifferentialFrame df;
+      df.real = g;
+      df.with_virtual = &with_virtual;
+      df.light = light;
+      df.dominant = DominantOf(light_msg);
+      df.camera_tone = renderer.tone_mapping();
+      df.camera_rgb = camera_rgb;
+      differential->Compute(df, &diff_result);
+      camera_diff = camera_rgb;
+      render::ApplyDifferential(diff_result, width, height, camera_diff);
+      in.camera_rgb = camera_diff;
+      diff_ms_sum += diff_result.ms_total;
+      diff_changed_sum += diff_result.changed_pixels;
+      ++diff_frames;
+      node.Debug() << "differential: window " << diff_result.window.width() << "x"
+                   << diff_result.window.height() << ", " << diff_result.changed_pixels
+                   << " pixels changed, smallest factor " << diff_result.min_factor << ", "
+                   << diff_result.ms_total << " ms";
+    } else if (differential && !have_gbuffer && !real_depth.empty() && !warned_size) {
+      node.Warn() << "scene/gbuffer is not the camera image's size (or has no normals): no "
+                     "shadows from G_r for such frames";
+      warned_size = true;
+    }
     if (transfer_count > 0 && transfer_real.size() == transfer_virtual.size() &&
         transfer_real.size() == camera_rgb.size() / 3 * transfer_count) {
       in.transfer_real = transfer_real;
@@ -204,6 +345,9 @@ int Run(int argc, char** argv) {
   handlers.push_back({&gbuffer_sub, [&](bus::Sample&& s) {
                         const auto m = msgs::ReadMessage<msgs::GeometryBuffer>(s.data());
                         render::GeometryDepth(*m, m.payload, real_depth);
+                        if (differential || !placed) {
+                          render::GeometryPlanes(*m, m.payload, real_normals, real_colour);
+                        }
                       }});
   handlers.push_back({&transfer_sub, [&](bus::Sample&& s) {
                         const auto m = msgs::ReadMessage<msgs::TransferBuffer>(s.data());
@@ -218,7 +362,8 @@ int Run(int argc, char** argv) {
   // pose, scene pose and G_r are published before the light computed from them, so with
   // trigger=light a frame is drawn with its own inputs even when the node wakes late.
   handlers.push_back({&light_sub, [&](bus::Sample&& s) {
-                        light = render::LightFromMsg(*msgs::ReadMessage<msgs::ShLight>(s.data()));
+                        light_msg = *msgs::ReadMessage<msgs::ShLight>(s.data());
+                        light = render::LightFromMsg(light_msg);
                         have_light = true;
                         if (trigger == "light") render_frame();
                       }});
@@ -242,6 +387,11 @@ int Run(int argc, char** argv) {
   node.Spin(handlers);
   if (watcher.joinable()) watcher.join();
   node.Info() << "rendered " << frames << " frames";
+  if (diff_frames > 0) {
+    node.Info() << "differential rendering from G_r on " << diff_frames << " frames, mean "
+                << diff_ms_sum / diff_frames << " ms, " << diff_changed_sum / diff_frames
+                << " pixels changed per frame";
+  }
   if (display_lost) {
     node.Error()
         << "window backend: the X display closed the connection; exiting (backend:=offscreen "

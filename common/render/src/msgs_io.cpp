@@ -93,6 +93,18 @@ void GeometryDepth(const msgs::GeometryBuffer& g, std::span<const std::byte> pay
   }
 }
 
+void GeometryPlanes(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                    std::vector<float>& normals, std::vector<uint8_t>& colour) {
+  try {
+    const std::span<const float> n = msgs::NormalsPlane(g, payload);
+    normals.assign(n.begin(), n.end());
+    const std::span<const uint8_t> c = msgs::ColourPlane(g, payload);
+    colour.assign(c.begin(), c.end());
+  } catch (const msgs::MessageError& e) {
+    throw RenderError(e.what());
+  }
+}
+
 void TransferValues(const msgs::TransferBuffer& t, std::span<const std::byte> payload,
                     std::vector<float>& values) {
   try {

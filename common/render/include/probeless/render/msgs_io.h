@@ -30,6 +30,10 @@ void ImageToRgb(const msgs::Image& image, std::span<const std::byte> payload,
 // The depth plane of a geometry buffer (metres). Throws RenderError if it fails Validate.
 void GeometryDepth(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
                    std::vector<float>& depth);
+// The normals (3 per pixel, camera frame) and colour (sRGB, 3 per pixel) planes of a geometry
+// buffer. Throws RenderError if it fails Validate.
+void GeometryPlanes(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                    std::vector<float>& normals, std::vector<uint8_t>& colour);
 // The coefficients of a transfer buffer (interleaved). Throws RenderError if it fails Validate.
 void TransferValues(const msgs::TransferBuffer& t, std::span<const std::byte> payload,
                     std::vector<float>& values);

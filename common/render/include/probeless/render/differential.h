@@ -1,0 +1,182 @@
+// Differential rendering from the reconstruction (Gruber et al. 2015 §5.4, eq. 13-15): the virtual
+// objects rasterised into the real geometry buffer G_r (-> G_r'), the per-pixel radiance transfer
+// of both buffers by the scene light's SSDO (probeless_light's TransferComputer, §5.1 eq. 6-9, and
+// its one-bounce term, §5.3 eq. 10-12), and the change they make to the camera image:
+//   I_d = I_c (1 + T(R'_d) - T(R_d))      (eq. 13, linear RGB, T a tone mapper)
+//   I_final = I_d + I_i                    (eq. 15, I_i from R'_i and R_i, eq. 14)
+// on the real pixels. R'_d differs from R_d only where an SSDO sample of a pixel can land on a
+// virtual pixel: within the objects' screen footprint dilated by the SSDO radius, so both are
+// computed only in that window (TransferComputer::ComputeRegion) and every other pixel keeps the
+// camera byte. The virtual pixels themselves are left to the GL renderer (Renderer::Render draws
+// the baked objects over the result, hidden behind G_r).
+//
+// Frames: the camera optical frame (x right, y down, z forward), pixel (0, 0) the centre of the
+// top-left pixel (light::Intrinsics). Light: msgs::ShLight's RGB coefficients in the camera frame.
+// See docs/render.md ("Differential rendering from G_r").
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "probeless/light/transfer.h"
+#include "probeless/raytrace/geometry.h"
+#include "probeless/raytrace/mesh.h"
+#include "probeless/render/renderer.h"
+
+namespace probeless::render {
+
+// One virtual object to rasterise into G_r: its mesh (positions and unit normals in the object
+// frame, counter-clockwise seen from outside, optional linear vertex colours) placed in the
+// camera frame.
+struct RasterObject {
+  const raytrace::Mesh* mesh = nullptr;
+  raytrace::Transform object_to_camera;
+  raytrace::Vec3 albedo{1, 1, 1};  // linear, times the vertex colours
+  bool cull_back_faces = true;     // as VirtualObject::cull_back_faces
+};
+
+// G_r' = G_r with the virtual objects: the planes of light::GeometryView (depth in metres along z,
+// 0 = none; unit camera-frame normals facing the camera; sRGB colour bytes = the albedo of the
+// indirect term, 255 where G_r has no colour) plus which object each pixel shows.
+struct VirtualGeometry {
+  int width = 0;
+  int height = 0;
+  std::vector<float> depth;
+  std::vector<float> normals;
+  std::vector<uint8_t> colour;
+  // 0 = real (G_r), i + 1 = objects[i] of RasteriseObjects.
+  std::vector<uint16_t> object_id;
+  // The bounding box of the pixels with object_id != 0 (empty when no object is visible) and the
+  // nearest virtual depth there (metres; 0 when empty).
+  light::PixelRect footprint;
+  float min_virtual_depth = 0;
+  // The view of G_r' (borrowing the vectors above) with `intrinsics`.
+  light::GeometryView View(const light::Intrinsics& intrinsics) const {
+    return {width, height, intrinsics, depth, normals, colour};
+  }
+};
+
+// Rasterises `objects` (CPU, a z-buffer against G_r's depth: a virtual fragment replaces the real
+// pixel where it is nearer or G_r has no depth; pixel centres sampled, perspective-correct normals
+// and colours, triangles with a vertex closer than 1 cm to the camera plane skipped) into a copy
+// of `real` -> `out`. Throws RenderError for a null mesh, a mesh without normals or with
+// out-of-range indices, and LightError (light::ValidateGeometryView) for an invalid `real`.
+void RasteriseObjects(const light::GeometryView& real, std::span<const RasterObject> objects,
+                      VirtualGeometry* out);
+
+// The tone mapper T of eq. 13.
+enum class DifferentialTone {
+  // The camera's response as the virtual objects get it (ToneMapping: exposure e, clamp or
+  // extended Reinhard), the same T for both buffers.
+  kFixed,
+  // Gruber §5.4 after Reinhard et al. 2002 eq. 1-3: per buffer, R scaled by key / (the log-average
+  // luminance of that buffer over its surface pixels), then x / (1 + x).
+  kAverageKey,
+  // T(R'_d) - T(R_d) = (R'_d - R_d) / R_d per pixel, i.e. I_d = I_c R'_d / R_d: Debevec's
+  // differential rendering with the real pixel's albedo taken as I_c / R_d. Equals kFixed with a
+  // linear T where e R_d = 1 (the camera maps the estimated shading to full scale), and stays
+  // right when the estimated light is dimmer or brighter than the image (factor clamped to
+  // [0, 2]).
+  kRatio,
+};
+
+struct DifferentialOptions {
+  // The SSDO of both buffers: the scene light's (scene_light's params bands, directions, radius,
+  // seed; max_occluder_distance_m = 2 radius_m there). subsample is ignored (the window is
+  // computed at every `step`-th pixel).
+  light::TransferOptions transfer;
+  // Every step-th pixel of the window in x and y, the rest filled bilinearly from them (1 = every
+  // pixel; 2 = OursFast-style, about 4x faster).
+  int step = 1;
+  DifferentialTone tone = DifferentialTone::kFixed;
+  float key = 0.18f;     // kAverageKey: Reinhard's middle grey a
+  int average_step = 8;  // kAverageKey: the log-averages over every 8th pixel in x and y
+  bool indirect = true;  // eq. 14-15 when a dominant light is given
+};
+
+// One frame's input. `real` and `with_virtual` must have the same size and intrinsics.
+struct DifferentialFrame {
+  light::GeometryView real;
+  const VirtualGeometry* with_virtual = nullptr;
+  ShLightRgb light;  // camera frame
+  // The dominant light of eq. 10 (msgs::ShLight dominant_direction, intensity; camera frame);
+  // intensity 0 = no indirect term.
+  light::DominantLight dominant;
+  ToneMapping camera_tone;  // kFixed's T, and the response applied to I_i
+  // The camera image I_c (3 sRGB bytes per pixel): the albedo of a real pixel for I_i is
+  // I_c / T(R_d) (clamped to [0, 1]); empty = albedo 1.
+  std::span<const uint8_t> camera_rgb;
+};
+
+// The result on the window: per pixel of `window` (row-major within it), the factor of eq. 13
+// (1 + T(R'_d) - T(R_d), RGB) and the I_i added after it (eq. 15, linear RGB in the camera's
+// response). Virtual pixels (drawn by the renderer) and pixels where R'_d == R_d and R'_i == R_i
+// get exactly 1 and 0.
+struct DifferentialResult {
+  light::PixelRect window;  // empty: nothing changes
+  std::vector<float> factor;
+  std::vector<float> indirect;
+  double ms_transfer = 0;  // wall time of the four SSDO buffers (R_d, R'_d with R_i, R'_i)
+  // Window pixels whose factor is not 1 or whose I_i is not 0, and the smallest factor (red).
+  int changed_pixels = 0;
+  float min_factor = 1;
+  double ms_total = 0;
+  // The log-average luminances of kAverageKey (0 for kFixed).
+  float average_real = 0;
+  float average_with_virtual = 0;
+};
+
+// The SSDO reach in pixels around the footprint: a real point x is changed only if one of its
+// sample points x + omega r (r <= radius) projects onto a virtual pixel; at depth z that is at
+// most f radius / (z - radius) pixels away, and x lies no nearer than the virtual surface minus
+// max_occluder_distance_m. Returns the footprint dilated by that bound (clamped to the image,
+// empty for an empty footprint).
+light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intrinsics& k,
+                                    const light::TransferOptions& options);
+
+// Computes R_d, R'_d (and R_i, R'_i) on the window and eq. 13-14. Holds the SSDO computer and
+// scratch buffers; not re-entrant.
+class DifferentialRenderer {
+ public:
+  // Throws LightError for invalid transfer options, RenderError for step < 1, key <= 0 or
+  // average_step < 1.
+  explicit DifferentialRenderer(const DifferentialOptions& options);
+  ~DifferentialRenderer();
+  DifferentialRenderer(const DifferentialRenderer&) = delete;
+  DifferentialRenderer& operator=(const DifferentialRenderer&) = delete;
+
+  const DifferentialOptions& options() const { return options_; }
+
+  // Throws RenderError for a missing or mismatched with_virtual or camera image, LightError for
+  // an invalid real view.
+  void Compute(const DifferentialFrame& frame, DifferentialResult* out);
+
+ private:
+  DifferentialOptions options_;
+  std::unique_ptr<light::TransferComputer> computer_;
+  light::TransferResult real_, with_;
+  std::vector<uint8_t> real_colour_;
+};
+
+// Applies `result` to the camera image in place (width x height x 3 sRGB bytes): c = sRGB(lin(c) *
+// factor + indirect) on the window's pixels whose factor is not 1 or indirect not 0; every other
+// byte is left as it is. Throws RenderError for a size mismatch.
+void ApplyDifferential(const DifferentialResult& result, int width, int height,
+                       std::span<uint8_t> camera_rgb);
+
+// The AR hit test (ARKit's raycast): the translation (world frame) that makes `meshes` (anchor =
+// world frame, as placed so far), taken as one group, rest on the reconstructed surface seen at
+// pixel (u, v) of G_r: the surface point x (the pixel's depth, else the nearest pixel with depth
+// within 2 px) and its normal n (the mean of the valid normals within 2 px, facing the camera) in
+// the world frame; the group's bounding-box centre c moves to x + n h, h = max over vertices of
+// (c - v) . n (so its lowest point along n touches the surface). nullopt when there is no surface
+// there. Throws RenderError for a pixel outside the image or no meshes, LightError for an invalid
+// view.
+std::optional<raytrace::Transform> PlaceOnSurface(const light::GeometryView& g, double u, double v,
+                                                  const raytrace::Transform& camera_to_world,
+                                                  std::span<const raytrace::Mesh* const> meshes);
+
+}  // namespace probeless::render

@@ -1,0 +1,430 @@
+#include "probeless/render/differential.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <string>
+
+#include "probeless/raytrace/render.h"
+
+namespace probeless::render {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using raytrace::Vec3;
+
+double MsSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// Luminance of a white-light shading (the mean of R, G, B).
+float Luminance(const std::array<float, 3>& c) { return (c[0] + c[1] + c[2]) * (1.0f / 3); }
+
+// Reinhard et al. 2002 eq. 1: exp(mean log(delta + L)) over the valid samples of `t`.
+float LogAverage(const light::TransferResult& t, const ShLightRgb& light) {
+  const size_t cc = static_cast<size_t>(t.coefficient_count);
+  double sum = 0;
+  size_t n = 0;
+  for (size_t i = 0; i < t.valid.size(); ++i) {
+    if (!t.valid[i]) continue;
+    const float l = Luminance(ShadeTransfer({t.transfer.data() + i * cc, cc}, light));
+    sum += std::log(1e-4 + std::max(0.0f, l));
+    ++n;
+  }
+  return n == 0 ? 1.0f : static_cast<float>(std::exp(sum / static_cast<double>(n)));
+}
+
+}  // namespace
+
+void RasteriseObjects(const light::GeometryView& real, std::span<const RasterObject> objects,
+                      VirtualGeometry* out) {
+  light::ValidateGeometryView(real, "render::RasteriseObjects");
+  const int w = real.width, h = real.height;
+  const size_t pixels = static_cast<size_t>(w) * h;
+  out->width = w;
+  out->height = h;
+  out->depth.assign(real.depth.begin(), real.depth.end());
+  out->normals.assign(real.normals.begin(), real.normals.end());
+  if (real.colour.empty()) {
+    out->colour.assign(3 * pixels, 255);  // grey 1, as the SSDO's indirect term without colour
+  } else {
+    out->colour.assign(real.colour.begin(), real.colour.end());
+  }
+  out->object_id.assign(pixels, 0);
+  const light::Intrinsics& k = real.intrinsics;
+  const float fx = static_cast<float>(k.fx), fy = static_cast<float>(k.fy);
+  const float cx = static_cast<float>(k.cx), cy = static_cast<float>(k.cy);
+  int x0 = w, y0 = h, x1 = 0, y1 = 0;
+  float min_z = std::numeric_limits<float>::max();
+  for (size_t i = 0; i < objects.size(); ++i) {
+    const RasterObject& o = objects[i];
+    const std::string what = "render::RasteriseObjects: objects[" + std::to_string(i) + "]";
+    if (o.mesh == nullptr) throw RenderError(what + ": no mesh");
+    const raytrace::Mesh& mesh = *o.mesh;
+    if (mesh.normals.size() != mesh.positions.size()) {
+      throw RenderError(what + ": the mesh needs one normal per vertex");
+    }
+    const bool coloured = mesh.colors.size() == mesh.positions.size();
+    std::vector<Vec3> p(mesh.positions.size()), n(mesh.positions.size());
+    for (size_t v = 0; v < p.size(); ++v) {
+      p[v] = o.object_to_camera.Apply(mesh.positions[v]);
+      n[v] = o.object_to_camera.ApplyDirection(mesh.normals[v]);
+    }
+    const uint16_t id = static_cast<uint16_t>(std::min<size_t>(i + 1, 65535));
+    for (const auto& tri : mesh.triangles) {
+      if (tri[0] >= p.size() || tri[1] >= p.size() || tri[2] >= p.size()) {
+        throw RenderError(what + ": triangle index out of range");
+      }
+      const Vec3 a = p[tri[0]], b = p[tri[1]], c = p[tri[2]];
+      if (a.z < 0.01f || b.z < 0.01f || c.z < 0.01f) continue;
+      // Facing the camera: the geometric normal (b - a) x (c - a) points towards the origin.
+      const Vec3 e1{b.x - a.x, b.y - a.y, b.z - a.z}, e2{c.x - a.x, c.y - a.y, c.z - a.z};
+      const Vec3 g{e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z, e1.x * e2.y - e1.y * e2.x};
+      if (o.cull_back_faces && g.x * a.x + g.y * a.y + g.z * a.z >= 0) continue;
+      const float ua = fx * a.x / a.z + cx, va = fy * a.y / a.z + cy;
+      const float ub = fx * b.x / b.z + cx, vb = fy * b.y / b.z + cy;
+      const float uc = fx * c.x / c.z + cx, vc = fy * c.y / c.z + cy;
+      const float area = (ub - ua) * (vc - va) - (vb - va) * (uc - ua);
+      if (!(std::abs(area) > 1e-12f)) continue;
+      const int bu0 = std::max(0, static_cast<int>(std::ceil(std::min({ua, ub, uc}))));
+      const int bu1 = std::min(w - 1, static_cast<int>(std::floor(std::max({ua, ub, uc}))));
+      const int bv0 = std::max(0, static_cast<int>(std::ceil(std::min({va, vb, vc}))));
+      const int bv1 = std::min(h - 1, static_cast<int>(std::floor(std::max({va, vb, vc}))));
+      const float inv_area = 1.0f / area;
+      const float iza = 1 / a.z, izb = 1 / b.z, izc = 1 / c.z;
+      for (int v = bv0; v <= bv1; ++v) {
+        for (int u = bu0; u <= bu1; ++u) {
+          // Barycentrics of the pixel centre (screen space), then perspective-correct.
+          const float wa = ((ub - static_cast<float>(u)) * (vc - static_cast<float>(v)) -
+                            (vb - static_cast<float>(v)) * (uc - static_cast<float>(u))) *
+                           inv_area;
+          const float wb = ((uc - static_cast<float>(u)) * (va - static_cast<float>(v)) -
+                            (vc - static_cast<float>(v)) * (ua - static_cast<float>(u))) *
+                           inv_area;
+          const float wc = 1 - wa - wb;
+          if (wa < 0 || wb < 0 || wc < 0) continue;
+          const float iz = wa * iza + wb * izb + wc * izc;
+          const float z = 1 / iz;
+          const size_t q = static_cast<size_t>(v) * w + u;
+          const float zr = out->depth[q];
+          if (zr > 0 && !(z < zr)) continue;
+          const float pa = wa * iza * z, pb = wb * izb * z, pc = wc * izc * z;
+          const Vec3 na = n[tri[0]], nb = n[tri[1]], nc = n[tri[2]];
+          float nn[3] = {pa * na.x + pb * nb.x + pc * nc.x, pa * na.y + pb * nb.y + pc * nc.y,
+                         pa * na.z + pb * nb.z + pc * nc.z};
+          const float len = std::sqrt(nn[0] * nn[0] + nn[1] * nn[1] + nn[2] * nn[2]);
+          if (!(len > 0)) continue;
+          // Facing the camera (the G_r convention): n . (pixel ray) < 0.
+          const float ray = nn[0] * (u - cx) / fx + nn[1] * (v - cy) / fy + nn[2];
+          const float sign = ray > 0 ? -1.0f : 1.0f;
+          out->depth[q] = z;
+          for (int j = 0; j < 3; ++j) out->normals[3 * q + j] = sign * nn[j] / len;
+          Vec3 albedo = o.albedo;
+          if (coloured) {
+            const Vec3 ca = mesh.colors[tri[0]], cb = mesh.colors[tri[1]], cc = mesh.colors[tri[2]];
+            albedo = {albedo.x * (pa * ca.x + pb * cb.x + pc * cc.x),
+                      albedo.y * (pa * ca.y + pb * cb.y + pc * cc.y),
+                      albedo.z * (pa * ca.z + pb * cb.z + pc * cc.z)};
+          }
+          out->colour[3 * q] = raytrace::LinearToSrgb8(albedo.x);
+          out->colour[3 * q + 1] = raytrace::LinearToSrgb8(albedo.y);
+          out->colour[3 * q + 2] = raytrace::LinearToSrgb8(albedo.z);
+          out->object_id[q] = id;
+        }
+      }
+    }
+  }
+  // The footprint of what is visible at the end (a later object may hide an earlier one).
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const size_t q = static_cast<size_t>(v) * w + u;
+      if (out->object_id[q] == 0) continue;
+      x0 = std::min(x0, u), x1 = std::max(x1, u + 1);
+      y0 = std::min(y0, v), y1 = std::max(y1, v + 1);
+      min_z = std::min(min_z, out->depth[q]);
+    }
+  }
+  if (x1 > x0) {
+    out->footprint = {x0, y0, x1, y1};
+    out->min_virtual_depth = min_z;
+  } else {
+    out->footprint = {};
+    out->min_virtual_depth = 0;
+  }
+}
+
+light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intrinsics& k,
+                                    const light::TransferOptions& options) {
+  if (g.footprint.empty()) return {};
+  const double r = options.radius_m;
+  // The nearest real point that a virtual occluder can reach (SSDO range check), kept beyond the
+  // sample radius so that the bound stays finite.
+  const double zx =
+      std::max<double>(g.min_virtual_depth - options.max_occluder_distance_m, 1.2 * r);
+  const double reach = std::max(k.fx, k.fy) * r / std::sqrt(zx * zx - r * r);
+  const int d = static_cast<int>(std::ceil(std::min(reach, 1e5))) + 1;
+  return {std::max(0, g.footprint.x0 - d), std::max(0, g.footprint.y0 - d),
+          std::min(g.width, g.footprint.x1 + d), std::min(g.height, g.footprint.y1 + d)};
+}
+
+DifferentialRenderer::DifferentialRenderer(const DifferentialOptions& options) : options_(options) {
+  if (options.step < 1) {
+    throw RenderError("differential: step must be >= 1, got " + std::to_string(options.step));
+  }
+  if (!(options.key > 0)) throw RenderError("differential: key must be > 0");
+  if (options.average_step < 1) throw RenderError("differential: average_step must be >= 1");
+  light::TransferOptions t = options.transfer;
+  t.subsample = 1;
+  computer_ = std::make_unique<light::TransferComputer>(t);
+}
+
+DifferentialRenderer::~DifferentialRenderer() = default;
+
+void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResult* out) {
+  const auto t0 = Clock::now();
+  light::ValidateGeometryView(f.real, "render::DifferentialRenderer::Compute");
+  const VirtualGeometry* gv = f.with_virtual;
+  const int w = f.real.width, h = f.real.height;
+  const size_t pixels = static_cast<size_t>(w) * h;
+  if (gv == nullptr || gv->width != w || gv->height != h || gv->depth.size() != pixels ||
+      gv->object_id.size() != pixels) {
+    throw RenderError("render::DifferentialRenderer::Compute: with_virtual must be G_r' of the " +
+                      std::to_string(w) + "x" + std::to_string(h) + " G_r (RasteriseObjects)");
+  }
+  if (!f.camera_rgb.empty() && f.camera_rgb.size() != 3 * pixels) {
+    throw RenderError("render::DifferentialRenderer::Compute: camera image has " +
+                      std::to_string(f.camera_rgb.size()) + " bytes, expected 3 x " +
+                      std::to_string(w) + "x" + std::to_string(h));
+  }
+  *out = DifferentialResult{};
+  const light::PixelRect win = DifferentialWindow(*gv, f.real.intrinsics, options_.transfer);
+  if (win.empty()) {
+    out->ms_total = MsSince(t0);
+    return;
+  }
+  // G_r with the same reflector colours as G_r' on its real pixels (grey 1 without colour), so
+  // that R_i and R'_i differ only by the virtual objects.
+  light::GeometryView real = f.real;
+  if (real.colour.empty()) {
+    real_colour_.assign(3 * pixels, 255);
+    real.colour = real_colour_;
+  }
+  const light::GeometryView with = gv->View(f.real.intrinsics);
+  const bool indirect = options_.indirect && f.dominant.intensity > 0;
+  const light::DominantLight* dominant = indirect ? &f.dominant : nullptr;
+  const int step = options_.step;
+  const auto t_transfer = Clock::now();
+  computer_->ComputeRegion(real, {}, dominant, win, step, &real_);
+  computer_->ComputeRegion(with, {}, dominant, win, step, &with_);
+  float avg_real = 0, avg_with = 0;
+  if (options_.tone == DifferentialTone::kAverageKey) {
+    // The per-buffer key of Gruber §5.4 (Reinhard 2002 eq. 1) over the whole image, sparsely.
+    light::TransferResult sparse;
+    const light::PixelRect all{0, 0, w, h};
+    computer_->ComputeRegion(real, {}, nullptr, all, options_.average_step, &sparse);
+    avg_real = LogAverage(sparse, f.light);
+    computer_->ComputeRegion(with, {}, nullptr, all, options_.average_step, &sparse);
+    avg_with = LogAverage(sparse, f.light);
+  }
+  out->ms_transfer = MsSince(t_transfer);
+  out->average_real = avg_real;
+  out->average_with_virtual = avg_with;
+
+  const ToneMapping& tone = f.camera_tone;
+  auto tone_real = [&](float x) {
+    if (options_.tone == DifferentialTone::kFixed) return tone.Apply(x);
+    const float s = options_.key * std::max(0.0f, x) / avg_real;
+    return s / (1 + s);
+  };
+  auto tone_with = [&](float x) {
+    if (options_.tone == DifferentialTone::kFixed) return tone.Apply(x);
+    const float s = options_.key * std::max(0.0f, x) / avg_with;
+    return s / (1 + s);
+  };
+  // Per sample: the eq. 13 factor and the eq. 14-15 addition (6 floats).
+  const int sw = real_.width, sh = real_.height;
+  const size_t cc = static_cast<size_t>(real_.coefficient_count);
+  std::vector<float> sample(6 * static_cast<size_t>(sw) * sh);
+  for (int j = 0; j < sh; ++j) {
+    for (int i = 0; i < sw; ++i) {
+      const size_t s = static_cast<size_t>(j) * sw + i;
+      float* o = &sample[6 * s];
+      o[0] = o[1] = o[2] = 1;
+      o[3] = o[4] = o[5] = 0;
+      const int u = std::min(win.x0 + i * step + step / 2, w - 1);
+      const int v = std::min(win.y0 + j * step + step / 2, h - 1);
+      const size_t p = static_cast<size_t>(v) * w + u;
+      if (gv->object_id[p] != 0 || !real_.valid[s] || !with_.valid[s]) continue;
+      const float* tr = &real_.transfer[s * cc];
+      const float* tw = &with_.transfer[s * cc];
+      const bool direct_differs = !std::equal(tr, tr + cc, tw);
+      const bool bounce_differs =
+          indirect &&
+          !std::equal(&real_.indirect[3 * s], &real_.indirect[3 * s] + 3, &with_.indirect[3 * s]);
+      if (!direct_differs && !bounce_differs) continue;
+      const auto rd = ShadeTransfer({tr, cc}, f.light);
+      const auto rv = ShadeTransfer({tw, cc}, f.light);
+      if (direct_differs && options_.tone == DifferentialTone::kRatio) {
+        for (int c = 0; c < 3; ++c) {
+          o[c] = rd[c] > 1e-4f ? std::clamp(rv[c] / rd[c], 0.0f, 2.0f) : 1.0f;
+        }
+      } else if (direct_differs) {
+        for (int c = 0; c < 3; ++c) {
+          o[c] = std::max(0.0f, 1 + tone_with(rv[c]) - tone_real(rd[c]));  // eq. 13
+        }
+      }
+      if (bounce_differs) {
+        // Eq. 14 adds R'_i where it differs from R_i; the camera already shows the real-only
+        // bounce R_i, so only the virtual objects' part, R'_i - R_i (>= 0), is added, times the
+        // pixel's albedo I_c / T(R_d) and the camera's exposure.
+        for (int c = 0; c < 3; ++c) {
+          const float delta = std::max(0.0f, with_.indirect[3 * s + c] - real_.indirect[3 * s + c]);
+          float albedo = 1;
+          if (!f.camera_rgb.empty()) {
+            const float lit = std::max(tone.Apply(rd[c]), 0.02f);
+            albedo = std::min(1.0f, light::SrgbToLinear(f.camera_rgb[3 * p + c]) / lit);
+          }
+          o[3 + c] = delta * albedo * tone.exposure;
+        }
+      }
+    }
+  }
+  // Full resolution on the window (bilinear between samples when step > 1; equal taps copied, so
+  // an unchanged neighbourhood stays exactly 1 and 0).
+  out->window = win;
+  const size_t wp = static_cast<size_t>(win.width()) * win.height();
+  out->factor.assign(3 * wp, 1.0f);
+  out->indirect.assign(3 * wp, 0.0f);
+  for (int y = win.y0; y < win.y1; ++y) {
+    for (int x = win.x0; x < win.x1; ++x) {
+      const size_t q = static_cast<size_t>(y - win.y0) * win.width() + (x - win.x0);
+      if (gv->object_id[static_cast<size_t>(y) * w + x] != 0) continue;
+      const float* vals[4];
+      float wt[4];
+      if (step == 1) {
+        vals[0] = &sample[6 * q];
+        wt[0] = 1;
+        vals[1] = vals[2] = vals[3] = vals[0];
+        wt[1] = wt[2] = wt[3] = 0;
+      } else {
+        const float fx = static_cast<float>(x - win.x0 - step / 2) / step;
+        const float fy = static_cast<float>(y - win.y0 - step / 2) / step;
+        const int i0 = std::clamp(static_cast<int>(std::floor(fx)), 0, sw - 1);
+        const int j0 = std::clamp(static_cast<int>(std::floor(fy)), 0, sh - 1);
+        const int i1 = std::min(i0 + 1, sw - 1), j1 = std::min(j0 + 1, sh - 1);
+        const float ax = std::clamp(fx - i0, 0.0f, 1.0f), ay = std::clamp(fy - j0, 0.0f, 1.0f);
+        vals[0] = &sample[6 * (static_cast<size_t>(j0) * sw + i0)];
+        vals[1] = &sample[6 * (static_cast<size_t>(j0) * sw + i1)];
+        vals[2] = &sample[6 * (static_cast<size_t>(j1) * sw + i0)];
+        vals[3] = &sample[6 * (static_cast<size_t>(j1) * sw + i1)];
+        wt[0] = (1 - ax) * (1 - ay), wt[1] = ax * (1 - ay), wt[2] = (1 - ax) * ay, wt[3] = ax * ay;
+      }
+      bool changed = false;
+      for (int c = 0; c < 6; ++c) {
+        const float v0 = vals[0][c];
+        float value = v0;
+        if (vals[1][c] != v0 || vals[2][c] != v0 || vals[3][c] != v0) {
+          value = wt[0] * v0 + wt[1] * vals[1][c] + wt[2] * vals[2][c] + wt[3] * vals[3][c];
+        }
+        if (c < 3) {
+          out->factor[3 * q + c] = value;
+        } else {
+          out->indirect[3 * q + c - 3] = value;
+        }
+        changed |= c < 3 ? value != 1 : value != 0;
+      }
+      out->changed_pixels += changed;
+      out->min_factor = std::min(out->min_factor, out->factor[3 * q]);
+    }
+  }
+  out->ms_total = MsSince(t0);
+}
+
+void ApplyDifferential(const DifferentialResult& r, int width, int height,
+                       std::span<uint8_t> camera_rgb) {
+  if (width < 1 || height < 1 || camera_rgb.size() != static_cast<size_t>(width) * height * 3) {
+    throw RenderError("render::ApplyDifferential: camera image has " +
+                      std::to_string(camera_rgb.size()) + " bytes, expected 3 x " +
+                      std::to_string(width) + "x" + std::to_string(height));
+  }
+  const light::PixelRect& win = r.window;
+  if (win.empty()) return;
+  const size_t wp = static_cast<size_t>(win.width()) * win.height();
+  if (win.x0 < 0 || win.y0 < 0 || win.x1 > width || win.y1 > height || r.factor.size() != 3 * wp ||
+      r.indirect.size() != 3 * wp) {
+    throw RenderError("render::ApplyDifferential: the result's window does not fit the image");
+  }
+  for (int y = win.y0; y < win.y1; ++y) {
+    for (int x = win.x0; x < win.x1; ++x) {
+      const size_t q = static_cast<size_t>(y - win.y0) * win.width() + (x - win.x0);
+      const float* f = &r.factor[3 * q];
+      const float* a = &r.indirect[3 * q];
+      if (f[0] == 1 && f[1] == 1 && f[2] == 1 && a[0] == 0 && a[1] == 0 && a[2] == 0) continue;
+      uint8_t* c = &camera_rgb[3 * (static_cast<size_t>(y) * width + x)];
+      for (int k = 0; k < 3; ++k) {
+        c[k] = raytrace::LinearToSrgb8(light::SrgbToLinear(c[k]) * f[k] + a[k]);  // eq. 13, 15
+      }
+    }
+  }
+}
+
+std::optional<raytrace::Transform> PlaceOnSurface(const light::GeometryView& g, double u, double v,
+                                                  const raytrace::Transform& camera_to_world,
+                                                  std::span<const raytrace::Mesh* const> meshes) {
+  light::ValidateGeometryView(g, "render::PlaceOnSurface");
+  if (!(u > -0.5 && v > -0.5 && u < g.width - 0.5 && v < g.height - 0.5)) {
+    char pixel[64];
+    std::snprintf(pixel, sizeof(pixel), "[%g, %g]", u, v);
+    throw RenderError("object_pixel " + std::string(pixel) + " is outside the " +
+                      std::to_string(g.width) + "x" + std::to_string(g.height) + " image");
+  }
+  if (meshes.empty()) throw RenderError("render::PlaceOnSurface: no meshes to place");
+  const int pu = static_cast<int>(std::lround(u)), pv = static_cast<int>(std::lround(v));
+  int best = -1;
+  double best_d2 = 1e30;
+  double n[3] = {0, 0, 0};
+  for (int dv = -2; dv <= 2; ++dv) {
+    for (int du = -2; du <= 2; ++du) {
+      const int x = pu + du, y = pv + dv;
+      if (x < 0 || y < 0 || x >= g.width || y >= g.height) continue;
+      const size_t q = static_cast<size_t>(y) * g.width + x;
+      const float* nq = &g.normals[3 * q];
+      if (!(g.depth[q] > 0) || (nq[0] == 0 && nq[1] == 0 && nq[2] == 0)) continue;
+      for (int c = 0; c < 3; ++c) n[c] += nq[c];
+      const double d2 = du * du + dv * dv;
+      if (d2 < best_d2) best_d2 = d2, best = static_cast<int>(q);
+    }
+  }
+  const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  if (best < 0 || !(len > 0)) return std::nullopt;
+  float xc[3];
+  g.intrinsics.BackProject(best % g.width, best / g.width, g.depth[best], xc);
+  const Vec3 x = camera_to_world.Apply({xc[0], xc[1], xc[2]});
+  const Vec3 nw = camera_to_world.ApplyDirection({static_cast<float>(n[0] / len),
+                                                  static_cast<float>(n[1] / len),
+                                                  static_cast<float>(n[2] / len)});
+  Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
+  for (const raytrace::Mesh* m : meshes) {
+    for (const Vec3& p : m->positions) {
+      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+  }
+  if (!(lo.x <= hi.x)) throw RenderError("render::PlaceOnSurface: the meshes have no vertices");
+  const Vec3 c{(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+  double h = 0;
+  for (const raytrace::Mesh* m : meshes) {
+    for (const Vec3& p : m->positions) {
+      h = std::max(
+          h, static_cast<double>((c.x - p.x) * nw.x + (c.y - p.y) * nw.y + (c.z - p.z) * nw.z));
+    }
+  }
+  raytrace::Transform t;
+  t.translation = {x.x + nw.x * h - c.x, x.y + nw.y * h - c.y, x.z + nw.z * h - c.z};
+  return t;
+}
+
+}  // namespace probeless::render
