@@ -1,17 +1,22 @@
-// Light fusion: confidence weights, staleness, low confidence, band counts, frames.
+// Light fusion: the confidence scale, inverse-variance weights, staleness, low confidence, band
+// weighting, disagreeing inputs against ground truth, units and frames refused.
 #include "probeless/light/fusion.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <numbers>
 #include <vector>
+
+#include "probeless/sh/sh.h"
 
 namespace probeless::light {
 namespace {
 
-msgs::ShLight Light(int64_t stamp, float confidence, float dc, float dx, float dy, float dz,
-                    uint32_t bands = 3) {
-  msgs::ShLight l;
+FusionInput Light(int64_t stamp, float confidence, float dc, float dx, float dy, float dz,
+                  uint32_t bands = 3) {
+  FusionInput in;
+  msgs::ShLight& l = in.light;
   l.header.stamp_ns = stamp;
   l.header.SetFrameId("camera");
   l.bands = bands;
@@ -23,51 +28,151 @@ msgs::ShLight Light(int64_t stamp, float confidence, float dc, float dx, float d
   l.dominant_direction[2] = dz;
   l.intensity = dc;
   l.confidence = confidence;
-  return l;
+  return in;
 }
 
-TEST(FuseLightsTest, WeightsByConfidence) {
-  const std::vector<msgs::ShLight> in = {Light(100, 0.75f, 1.0f, 1, 0, 0),
-                                         Light(90, 0.25f, 3.0f, 0, 1, 0)};
+// A directional light of power `power` from unit d plus ambient (ShLight units), with
+// confidence.
+FusionInput Directional(const sh::Vec3& d, double power, float confidence, const char* name) {
+  FusionInput in;
+  in.name = name;
+  msgs::ShLight& l = in.light;
+  l.header.stamp_ns = 100;
+  l.header.SetFrameId("camera");
+  l.bands = 3;
+  const auto y = sh::Basis9(d);
+  for (int n = 0; n < 9; ++n) {
+    for (int c = 0; c < 3; ++c) l.coefficients[n][c] = static_cast<float>(power * y[n]);
+  }
+  for (int k = 0; k < 3; ++k) l.dominant_direction[k] = static_cast<float>(d[k]);
+  l.intensity = static_cast<float>(power);
+  l.confidence = confidence;
+  return in;
+}
+
+sh::Vec3 Rotated(const sh::Vec3& d, const sh::Vec3& axis, double degrees) {
+  // Rodrigues: d cos + (a x d) sin + a (a.d)(1 - cos).
+  const double t = degrees * std::numbers::pi / 180, c = std::cos(t), s = std::sin(t);
+  const sh::Vec3 x{axis[1] * d[2] - axis[2] * d[1], axis[2] * d[0] - axis[0] * d[2],
+                   axis[0] * d[1] - axis[1] * d[0]};
+  const double dot = axis[0] * d[0] + axis[1] * d[1] + axis[2] * d[2];
+  return {d[0] * c + x[0] * s + axis[0] * dot * (1 - c),
+          d[1] * c + x[1] * s + axis[1] * dot * (1 - c),
+          d[2] * c + x[2] * s + axis[2] * dot * (1 - c)};
+}
+
+double AngleDeg(const sh::Vec3& a, const float* b) {
+  const double dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+TEST(FuseLightsTest, ConfidenceScale) {
+  EXPECT_DOUBLE_EQ(ConfidenceFromExpectedError(10), 0.5);
+  EXPECT_DOUBLE_EQ(ConfidenceFromExpectedError(20), 0.2);
+  EXPECT_DOUBLE_EQ(ConfidenceFromExpectedError(0), 1);
+  EXPECT_EQ(ConfidenceFromExpectedError(std::numeric_limits<double>::infinity()), 0);
+  for (double e : {1.0, 5.0, 30.0, 120.0}) {
+    EXPECT_NEAR(ExpectedErrorFromConfidence(ConfidenceFromExpectedError(e)), e, 1e-9 * e);
+  }
+  EXPECT_TRUE(std::isinf(ExpectedErrorFromConfidence(0)));
+}
+
+TEST(FuseLightsTest, InverseVarianceWeights) {
+  // c = 0.75 (weight 3) and 0.25 (weight 1/3), directions 10 deg apart (consistent).
+  const double t = 10 * std::numbers::pi / 180;
+  const std::vector<FusionInput> in = {Light(100, 0.75f, 1.0f, 1, 0, 0),
+                                       Light(90, 0.25f, 3.0f, std::cos(t), std::sin(t), 0)};
   const auto out = FuseLights(in);
   ASSERT_TRUE(out);
   EXPECT_EQ(out->header.stamp_ns, 100);
   EXPECT_EQ(out->bands, 3u);
-  EXPECT_NEAR(out->coefficients[0][0], 1.5f, 1e-6);  // (0.75*1 + 0.25*3) / 1
-  EXPECT_NEAR(out->intensity, 1.5f, 1e-6);
-  EXPECT_NEAR(out->dominant_direction[0], 0.75 / std::sqrt(0.75 * 0.75 + 0.25 * 0.25), 1e-6);
-  EXPECT_NEAR(out->dominant_direction[1], 0.25 / std::sqrt(0.75 * 0.75 + 0.25 * 0.25), 1e-6);
-  EXPECT_NEAR(out->confidence, 1 - 0.25 * 0.75, 1e-6);
+  EXPECT_NEAR(out->coefficients[0][0], (3 * 1.0 + 3.0 / 3) / (3 + 1.0 / 3), 1e-6);
+  EXPECT_NEAR(out->intensity, (3 * 1.0 + 3.0 / 3) / (3 + 1.0 / 3), 1e-6);
+  const double x = 3 + std::cos(t) / 3, y = std::sin(t) / 3;
+  EXPECT_NEAR(out->dominant_direction[0], x / std::hypot(x, y), 1e-6);
+  EXPECT_NEAR(out->dominant_direction[1], y / std::hypot(x, y), 1e-6);
+  // Inverse variances add: W = 10/3, c = W / (1 + W).
+  EXPECT_NEAR(out->confidence, (10.0 / 3) / (1 + 10.0 / 3), 1e-6);
 }
 
 TEST(FuseLightsTest, StaleAndUnsureInputsAreLeftOut) {
   FusionOptions options;
   options.max_age_ns = 50;
-  const std::vector<msgs::ShLight> stale = {Light(1000, 0.5f, 1.0f, 1, 0, 0),
-                                            Light(900, 0.9f, 5.0f, 0, 1, 0)};
+  const std::vector<FusionInput> stale = {Light(1000, 0.5f, 1.0f, 1, 0, 0),
+                                          Light(900, 0.9f, 5.0f, 0, 1, 0)};
   const auto a = FuseLights(stale, options);
   ASSERT_TRUE(a);
   EXPECT_FLOAT_EQ(a->coefficients[0][0], 1.0f);
   EXPECT_FLOAT_EQ(a->confidence, 0.5f);
-  const std::vector<msgs::ShLight> unsure = {Light(1000, 0.01f, 1.0f, 1, 0, 0)};
+  const std::vector<FusionInput> unsure = {Light(1000, 0.01f, 1.0f, 1, 0, 0)};
   EXPECT_FALSE(FuseLights(unsure));
   EXPECT_FALSE(FuseLights({}));
 }
 
-TEST(FuseLightsTest, MoreBandsFromTheInputThatHasThem) {
-  const std::vector<msgs::ShLight> in = {Light(100, 0.5f, 1.0f, 0, 0, -1, 2),
-                                         Light(100, 0.5f, 3.0f, 0, 0, -1, 3)};
+TEST(FuseLightsTest, ABandOneInputHasIsWeightedByItsConfidence) {
+  // Weights 1 (c 0.5) and 3 (c 0.75).
+  const std::vector<FusionInput> in = {Light(100, 0.5f, 1.0f, 0, 0, -1, 2),
+                                       Light(100, 0.75f, 3.0f, 0, 0, -1, 3)};
   const auto out = FuseLights(in);
   ASSERT_TRUE(out);
   EXPECT_EQ(out->bands, 3u);
-  EXPECT_FLOAT_EQ(out->coefficients[0][0], 2.0f);  // both
-  EXPECT_FLOAT_EQ(out->coefficients[8][0], 3.0f);  // band 2: only the second
+  EXPECT_FLOAT_EQ(out->coefficients[0][0], (1 * 1.0f + 3 * 3.0f) / 4);  // both
+  // Band 2 only the second has: its share 3 / 4 of its value, not the value at full weight.
+  EXPECT_FLOAT_EQ(out->coefficients[8][0], 3 * 3.0f / 4);
+  // One input alone keeps its bands.
+  const std::vector<FusionInput> one = {in[1]};
+  EXPECT_FLOAT_EQ(FuseLights(one)->coefficients[8][0], 3.0f);
+}
+
+// Ground truth d; the face estimate 5 deg off claims 6 deg (c 0.735), the scene estimate 70 deg
+// off (a wrong light) claims 10 deg (c 0.5). Averaged by the same weights they give 12.6 deg; the
+// fusion keeps the face alone (75 deg apart > 3 sqrt(6^2 + 10^2) = 35 deg).
+TEST(FuseLightsTest, DisagreeingInputsAgainstGroundTruth) {
+  const sh::Vec3 truth{0.3 / std::sqrt(1.1), -0.1 / std::sqrt(1.1), -1 / std::sqrt(1.1)};
+  const sh::Vec3 axis{0, 1, 0};
+  const float face_c = static_cast<float>(ConfidenceFromExpectedError(6));
+  const float scene_c = static_cast<float>(ConfidenceFromExpectedError(10));
+  const std::vector<FusionInput> in = {
+      Directional(Rotated(truth, axis, 5), 2.0, face_c, "face"),
+      Directional(Rotated(truth, axis, -70), 2.0, scene_c, "scene")};
+  const auto out = FuseLights(in);
+  ASSERT_TRUE(out);
+  EXPECT_LT(AngleDeg(truth, out->dominant_direction), 5.5);
+  EXPECT_FLOAT_EQ(out->confidence, face_c);
+  FusionOptions average;
+  average.consistency_sigma = 0;
+  const auto raw = FuseLights(in, average);
+  EXPECT_GT(AngleDeg(truth, raw->dominant_direction), 10);
+  // Consistent inputs on either side of the truth (8 deg and 12 deg off, claiming 8 and 12 deg):
+  // the fused direction is better than either.
+  const std::vector<FusionInput> agree = {
+      Directional(Rotated(truth, axis, 8), 2.0, static_cast<float>(ConfidenceFromExpectedError(8)),
+                  "face"),
+      Directional(Rotated(truth, axis, -12), 2.0,
+                  static_cast<float>(ConfidenceFromExpectedError(12)), "scene")};
+  const auto both = FuseLights(agree);
+  ASSERT_TRUE(both);
+  EXPECT_LT(AngleDeg(truth, both->dominant_direction), 3);
+  EXPECT_GT(both->confidence, agree[0].light.confidence);
+}
+
+TEST(FuseLightsTest, DifferentUnitsAreRefused) {
+  std::vector<FusionInput> in = {Light(100, 0.5f, 1.0f, 1, 0, 0), Light(100, 0.5f, 1.0f, 1, 0, 0)};
+  in[0].name = "face/light";
+  in[0].units = LightUnits::kRelative;
+  try {
+    FuseLights(in);
+    FAIL() << "no exception";
+  } catch (const FusionError& e) {
+    EXPECT_STREQ(e.what(),
+                 "light fusion: 'face/light' is in relative (face-model) units, expected linear "
+                 "radiance (msgs::ShLight); not averaged");
+  }
 }
 
 TEST(FuseLightsTest, DifferentFramesAreAnError) {
-  std::vector<msgs::ShLight> in = {Light(100, 0.5f, 1.0f, 1, 0, 0),
-                                   Light(100, 0.5f, 1.0f, 1, 0, 0)};
-  in[1].header.SetFrameId("world");
+  std::vector<FusionInput> in = {Light(100, 0.5f, 1.0f, 1, 0, 0), Light(100, 0.5f, 1.0f, 1, 0, 0)};
+  in[1].light.header.SetFrameId("world");
   try {
     FuseLights(in);
     FAIL() << "no exception";

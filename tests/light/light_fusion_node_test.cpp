@@ -1,5 +1,7 @@
 // The light_fusion node as a process: a face and a scene light in, their confidence-weighted fusion
-// out on `light`; bad params exit 2 with one line.
+// out on `light` (inverse-variance weights on the ShLight confidence scale); a disagreeing less
+// confident input left out; an input declared in relative units refused; bad params exit 2 with
+// one line.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -7,6 +9,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <numbers>
 #include <string>
 #include <thread>
 
@@ -48,8 +51,10 @@ TEST(LightFusionNodeTest, FusesTheFaceAndSceneLights) {
   }
   ASSERT_EQ(face.SubscriberCount(), 1u);
   ASSERT_EQ(scene.SubscriberCount(), 1u);
+  // 10 deg apart (consistent): weights c / (1 - c) = 3 and 1/3.
+  const float t = static_cast<float>(10 * std::numbers::pi / 180);
   const msgs::ShLight a = Light(0.75f, 1, 0, 0);
-  const msgs::ShLight b = Light(0.25f, 0, 1, 0);
+  const msgs::ShLight b = Light(0.25f, std::cos(t), std::sin(t), 0);
   face.PublishCopy(std::as_bytes(std::span(&a, 1)));
   auto first = fused.Take(2s);
   ASSERT_TRUE(first);
@@ -58,12 +63,51 @@ TEST(LightFusionNodeTest, FusesTheFaceAndSceneLights) {
   auto second = fused.Take(2s);
   ASSERT_TRUE(second);
   const auto out = msgs::ReadMessage<msgs::ShLight>(second->data());
-  EXPECT_NEAR(out->confidence, 1 - 0.25 * 0.75, 1e-6);
-  const double n = std::sqrt(0.75 * 0.75 + 0.25 * 0.25);
-  EXPECT_NEAR(out->dominant_direction[0], 0.75 / n, 1e-6);
-  EXPECT_NEAR(out->dominant_direction[1], 0.25 / n, 1e-6);
+  EXPECT_NEAR(out->confidence, (10.0 / 3) / (1 + 10.0 / 3), 1e-6);
+  const double x = 3 + std::cos(t) / 3, y = std::sin(t) / 3;
+  EXPECT_NEAR(out->dominant_direction[0], x / std::hypot(x, y), 1e-6);
+  EXPECT_NEAR(out->dominant_direction[1], y / std::hypot(x, y), 1e-6);
+  // 90 deg apart: the scene light (expected error 17 deg) is left out, the face light followed.
+  const msgs::ShLight c = Light(0.25f, 0, 1, 0);
+  scene.PublishCopy(std::as_bytes(std::span(&c, 1)));
+  auto third = fused.Take(2s);
+  ASSERT_TRUE(third);
+  const auto alone = msgs::ReadMessage<msgs::ShLight>(third->data());
+  EXPECT_FLOAT_EQ(alone->confidence, 0.75f);
+  EXPECT_FLOAT_EQ(alone->dominant_direction[0], 1.0f);
   node.Signal(SIGINT);
   EXPECT_EQ(node.Wait(5s), 0) << node.Err();
+}
+
+TEST(LightFusionNodeTest, RelativeUnitsAreRefused) {
+  bus::Subscriber fused("/light", msgs::TopicTypeOf<msgs::ShLight>(), {.queue_depth = 8});
+  bus::Publisher face("/face/light", msgs::TopicTypeOf<msgs::ShLight>(),
+                      {.max_message_bytes = sizeof(msgs::ShLight)});
+  bus::Publisher scene("/scene/light", msgs::TopicTypeOf<msgs::ShLight>(),
+                       {.max_message_bytes = sizeof(msgs::ShLight)});
+  probeless::testing::Process node("light_fusion", {"--ros-args", "-r", "face/light:=/face/light",
+                                                    "-r", "scene/light:=/scene/light", "-r",
+                                                    "light:=/light", "-p", "face_units:=relative"});
+  for (int i = 0; i < 300 && (face.SubscriberCount() == 0 || scene.SubscriberCount() == 0); ++i) {
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(scene.SubscriberCount(), 1u);
+  const msgs::ShLight a = Light(0.75f, 1, 0, 0);
+  const msgs::ShLight b = Light(0.5f, 0, 1, 0);
+  face.PublishCopy(std::as_bytes(std::span(&a, 1)));
+  EXPECT_FALSE(fused.Take(300ms));  // refused, nothing to publish
+  scene.PublishCopy(std::as_bytes(std::span(&b, 1)));
+  auto out = fused.Take(2s);
+  ASSERT_TRUE(out);
+  // The scene light alone: never averaged with the relative face light.
+  EXPECT_FLOAT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->confidence, 0.5f);
+  EXPECT_FLOAT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->dominant_direction[1], 1.0f);
+  node.Signal(SIGINT);
+  EXPECT_EQ(node.Wait(5s), 0) << node.Err();
+  EXPECT_NE(node.Err().find("/face/light is declared in relative units (face_units); it is "
+                            "refused, only linear lights are fused"),
+            std::string::npos)
+      << node.Err();
 }
 
 TEST(LightFusionNodeTest, BadParamsExitTwoWithOneLine) {
@@ -72,6 +116,11 @@ TEST(LightFusionNodeTest, BadParamsExitTwoWithOneLine) {
       std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p max_age_s:=0", dir.path());
   EXPECT_EQ(r.code, 2);
   EXPECT_EQ(r.err, "[error] [light_fusion] param max_age_s must be > 0\n");
+  const auto u = probeless::testing::RunCommand(
+      std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p face_units:=gamma", dir.path());
+  EXPECT_EQ(u.code, 2);
+  EXPECT_EQ(u.err,
+            "[error] [light_fusion] param face_units must be linear or relative, got 'gamma'\n");
 }
 
 }  // namespace

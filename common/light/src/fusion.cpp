@@ -2,28 +2,85 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <numbers>
 #include <vector>
 
 namespace probeless::light {
 
-std::optional<msgs::ShLight> FuseLights(std::span<const msgs::ShLight> inputs,
+namespace {
+
+constexpr double kMaxConfidence = 0.999;  // keeps the weight c / (1 - c) finite
+
+std::string Name(const FusionInput& input, size_t index) {
+  return input.name.empty() ? "input " + std::to_string(index) : "'" + input.name + "'";
+}
+
+double AngleDeg(const float* a, const float* b) {
+  const double na = std::sqrt(double(a[0]) * a[0] + double(a[1]) * a[1] + double(a[2]) * a[2]);
+  const double nb = std::sqrt(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2]);
+  if (!(na > 1e-6) || !(nb > 1e-6)) return 0;  // no direction: nothing to disagree about
+  const double dot = (double(a[0]) * b[0] + double(a[1]) * b[1] + double(a[2]) * b[2]) / (na * nb);
+  return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
+}
+
+}  // namespace
+
+double ConfidenceFromExpectedError(double error_deg) {
+  if (!(error_deg >= 0)) return 0;
+  const double r = error_deg / kConfidenceReferenceErrorDeg;
+  return 1 / (1 + r * r);
+}
+
+double ExpectedErrorFromConfidence(double confidence) {
+  if (!(confidence > 0)) return std::numeric_limits<double>::infinity();
+  const double c = std::min(confidence, 1.0);
+  return kConfidenceReferenceErrorDeg * std::sqrt((1 - c) / c);
+}
+
+std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
                                         const FusionOptions& options) {
   if (inputs.empty()) return std::nullopt;
-  int64_t newest = inputs[0].header.stamp_ns;
-  for (const auto& in : inputs) {
+  int64_t newest = inputs[0].light.header.stamp_ns;
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    const msgs::ShLight& in = inputs[i].light;
     in.Validate();
-    if (in.header.FrameId() != inputs[0].header.FrameId()) {
+    if (inputs[i].units != LightUnits::kLinear) {
+      throw FusionError("light fusion: " + Name(inputs[i], i) +
+                        " is in relative (face-model) units, expected linear radiance "
+                        "(msgs::ShLight); not averaged");
+    }
+    if (in.header.FrameId() != inputs[0].light.header.FrameId()) {
       throw FusionError("light fusion: inputs in different frames ('" +
-                        std::string(inputs[0].header.FrameId()) + "' and '" +
+                        std::string(inputs[0].light.header.FrameId()) + "' and '" +
                         std::string(in.header.FrameId()) + "'); expected one frame");
     }
     newest = std::max(newest, in.header.stamp_ns);
   }
-  std::vector<const msgs::ShLight*> used;
-  for (const auto& in : inputs) {
+  std::vector<const msgs::ShLight*> candidates;
+  for (const auto& input : inputs) {
+    const msgs::ShLight& in = input.light;
     if (newest - in.header.stamp_ns > options.max_age_ns) continue;
     if (!(in.confidence >= options.min_confidence)) continue;
-    used.push_back(&in);
+    candidates.push_back(&in);
+  }
+  // Most confident first (stable: ties keep the input order), each kept only if it agrees with
+  // every input kept before it.
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const auto* a, const auto* b) { return a->confidence > b->confidence; });
+  std::vector<const msgs::ShLight*> used;
+  for (const auto* in : candidates) {
+    bool consistent = true;
+    for (const auto* kept : used) {
+      if (!(options.consistency_sigma > 0)) break;
+      const double ea = ExpectedErrorFromConfidence(in->confidence);
+      const double eb = ExpectedErrorFromConfidence(kept->confidence);
+      if (AngleDeg(in->dominant_direction, kept->dominant_direction) >
+          options.consistency_sigma * std::sqrt(ea * ea + eb * eb)) {
+        consistent = false;
+      }
+    }
+    if (consistent) used.push_back(in);
   }
   if (used.empty()) return std::nullopt;
 
@@ -33,17 +90,15 @@ std::optional<msgs::ShLight> FuseLights(std::span<const msgs::ShLight> inputs,
       [](const auto* a, const auto* b) { return a->header.stamp_ns < b->header.stamp_ns; });
   out.header = newest_input->header;
   for (const auto* in : used) out.bands = std::max(out.bands, in->bands);
-  double weight_sum[msgs::kMaxShCoefficients] = {};
   double sums[msgs::kMaxShCoefficients][3] = {};
   double direction[3] = {};
   double intensity = 0;
   double total = 0;
-  double miss = 1;
   for (const auto* in : used) {
-    const double w = in->confidence;
+    const double c = std::min<double>(in->confidence, kMaxConfidence);
+    const double w = c / (1 - c);
     for (uint32_t i = 0; i < in->CoefficientCount(); ++i) {
-      weight_sum[i] += w;
-      for (int c = 0; c < 3; ++c) sums[i][c] += w * in->coefficients[i][c];
+      for (int ch = 0; ch < 3; ++ch) sums[i][ch] += w * in->coefficients[i][ch];
     }
     const double n = std::sqrt(in->dominant_direction[0] * in->dominant_direction[0] +
                                in->dominant_direction[1] * in->dominant_direction[1] +
@@ -53,13 +108,10 @@ std::optional<msgs::ShLight> FuseLights(std::span<const msgs::ShLight> inputs,
     }
     intensity += w * in->intensity;
     total += w;
-    miss *= 1.0 - w;
   }
   for (uint32_t i = 0; i < out.CoefficientCount(); ++i) {
-    for (int c = 0; c < 3; ++c) {
-      out.coefficients[i][c] =
-          weight_sum[i] > 0 ? static_cast<float>(sums[i][c] / weight_sum[i]) : 0;
-    }
+    for (int ch = 0; ch < 3; ++ch)
+      out.coefficients[i][ch] = static_cast<float>(sums[i][ch] / total);
   }
   const double n = std::sqrt(direction[0] * direction[0] + direction[1] * direction[1] +
                              direction[2] * direction[2]);
@@ -67,7 +119,7 @@ std::optional<msgs::ShLight> FuseLights(std::span<const msgs::ShLight> inputs,
     out.dominant_direction[k] = n > 1e-9 ? static_cast<float>(direction[k] / n) : 0.0f;
   }
   out.intensity = static_cast<float>(intensity / total);
-  out.confidence = static_cast<float>(std::clamp(1.0 - miss, 0.0, 1.0));
+  out.confidence = static_cast<float>(std::clamp(total / (1 + total), 0.0, 1.0));
   return out;
 }
 

@@ -1,6 +1,7 @@
 // Light fusion: one light from several estimates of the same lighting (beyond both papers): the
 // face-based estimate (Knorr & Kurz 2014) and the scene-based one (Gruber et al. 2015) combined by
-// their confidences, so the renderer can follow whichever is better at the moment.
+// their confidences, so the renderer can follow whichever is better at the moment
+// (docs/light.md, "Fusion").
 #pragma once
 
 #include <cstdint>
@@ -18,25 +19,56 @@ class FusionError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The one confidence scale of msgs::ShLight (docs/messages.md): confidence c <-> expected RMS
+// angular error e of the dominant direction, c = 1 / (1 + (e / kConfidenceReferenceErrorDeg)^2)
+// (c = 0.5 at 10 deg, 0.2 at 20 deg, 0.05 at 44 deg). Then c / (1 - c) = (10 deg / e)^2 is the
+// inverse-variance weight of the estimate.
+inline constexpr double kConfidenceReferenceErrorDeg = 10;
+// e in degrees (>= 0; +inf -> 0) -> c in [0, 1].
+double ConfidenceFromExpectedError(double error_deg);
+// c in [0, 1] -> e in degrees (c = 0 -> +inf).
+double ExpectedErrorFromConfidence(double confidence);
+
+// Units of a light's coefficients. kLinear: msgs::ShLight's contract (linear RGB radiance, 1 =
+// full scale of the image); kRelative: a face model's albedo-normalised, compressed units (only
+// the direction is meaningful), e.g. face_light with linear_output false.
+enum class LightUnits { kLinear, kRelative };
+
+// One input: a light, the units its producer declares, and a name for messages (e.g. the topic).
+struct FusionInput {
+  msgs::ShLight light;
+  LightUnits units = LightUnits::kLinear;
+  std::string name;
+};
+
 struct FusionOptions {
   // An input whose header.stamp_ns is more than this older than the newest input is ignored, ns.
   int64_t max_age_ns = 500'000'000;
-  // Inputs with confidence below this are ignored.
+  // Inputs with confidence below this are ignored (0.05 = an expected error of 44 deg).
   float min_confidence = 0.05f;
+  // Two inputs whose dominant directions are more than this many combined expected errors
+  // (sqrt(e_a^2 + e_b^2)) apart do not see the same light (or one is wrong): the less confident
+  // is left out instead of averaging the two into a direction neither supports. 0 = off.
+  double consistency_sigma = 3;
 };
 
-// Fuses `inputs` (all msgs::ShLight of the same frame_id, e.g. the camera frame):
-// - weights w_i = confidence_i of the inputs that are fresh (FusionOptions::max_age_ns) and
-//   confident enough;
-// - coefficients: sum w_i c_i / sum w_i over the bands both have (the result has the largest band
-//   count; coefficients only one input has are taken from it with its weight alone);
+// Fuses `inputs` (linear lights of one frame_id, e.g. the camera frame):
+// - inputs are used when fresh (FusionOptions::max_age_ns), confident enough and consistent
+//   (consistency_sigma, most confident first);
+// - weights w_i = c_i / (1 - c_i) (inverse variance on the confidence scale above; c clamped to
+//   0.999);
+// - coefficients: sum over the inputs that have coefficient k of w_i c_ik, divided by the sum of
+//   ALL used inputs' weights: a band only one input has is weighted by that input's share (a
+//   missing band counts as no light there), never copied at full weight; the result has the
+//   largest band count;
 // - dominant direction: the normalised w-weighted sum of the unit directions (inputs without one
 //   are left out); intensity: the w-weighted mean;
-// - confidence: 1 - prod(1 - c_i) (independent estimates reinforce each other);
-// - header: the newest input's.
-// Returns nullopt when no input qualifies. Throws FusionError when the frames differ (naming them)
-// or an input fails ShLight::Validate.
-std::optional<msgs::ShLight> FuseLights(std::span<const msgs::ShLight> inputs,
+// - confidence: from the summed weights, W / (1 + W) (inverse variances add);
+// - header: the newest used input's.
+// Returns nullopt when no input qualifies. Throws FusionError naming the input when one is not
+// in linear units (they are never averaged raw), when the frames differ (naming both), or when an
+// input fails ShLight::Validate.
+std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
                                         const FusionOptions& options = {});
 
 }  // namespace probeless::light
