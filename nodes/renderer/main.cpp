@@ -24,7 +24,8 @@
 // samples, bands, backend (offscreen | window), trigger (light | image: what starts a frame), tone
 // (clamp | reinhard), exposure, white, video (file), video_fps, png_dir, max_frames (0 =
 // unlimited), shadow_source (gbuffer | mesh), ssdo_radius, ssdo_directions, ssdo_bands, ssdo_seed,
-// ssdo_threads, differential_step, differential_tone (fixed | key), differential_key, indirect,
+// ssdo_threads, differential_step, differential_smooth, differential_tone (ratio | fixed | key),
+// differential_key, indirect,
 // object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there). Exit: 0 on
 // shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's X display
 // goes away (one line on stderr).
@@ -113,7 +114,8 @@ int Run(int argc, char** argv) {
   diff_options.transfer.seed = static_cast<uint64_t>(node.Param<int64_t>("ssdo_seed", 1));
   diff_options.transfer.threads = node.Param("ssdo_threads", 2);
   diff_options.step = node.Param("differential_step", 1);
-  const std::string diff_tone = node.Param("differential_tone", "fixed");
+  diff_options.smooth_radius = node.Param("differential_smooth", 2);
+  const std::string diff_tone = node.Param("differential_tone", "ratio");
   if (diff_tone != "fixed" && diff_tone != "key" && diff_tone != "ratio") {
     throw render::RenderError("param differential_tone: expected fixed, key or ratio, got '" +
                               diff_tone + "'");

@@ -176,6 +176,7 @@ DifferentialRenderer::DifferentialRenderer(const DifferentialOptions& options) :
   }
   if (!(options.key > 0)) throw RenderError("differential: key must be > 0");
   if (options.average_step < 1) throw RenderError("differential: average_step must be >= 1");
+  if (options.smooth_radius < 0) throw RenderError("differential: smooth_radius must be >= 0");
   light::TransferOptions t = options.transfer;
   t.subsample = 1;
   computer_ = std::make_unique<light::TransferComputer>(t);
@@ -291,6 +292,46 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
         }
       }
     }
+  }
+  if (options_.smooth_radius > 0) {
+    // Edge-aware box, rows then columns, over the real samples of similar depth; a neighbourhood
+    // of unchanged samples (1, 0) stays exactly unchanged (a mean of equal values).
+    std::vector<float> depth(static_cast<size_t>(sw) * sh, 0.0f);
+    for (int j = 0; j < sh; ++j) {
+      for (int i = 0; i < sw; ++i) {
+        const int u = std::min(win.x0 + i * step + step / 2, w - 1);
+        const int v = std::min(win.y0 + j * step + step / 2, h - 1);
+        const size_t p = static_cast<size_t>(v) * w + u;
+        const size_t s = static_cast<size_t>(j) * sw + i;
+        if (gv->object_id[p] == 0 && real_.valid[s]) depth[s] = f.real.depth[p];
+      }
+    }
+    std::vector<float> tmp(sample.size());
+    const int r = options_.smooth_radius;
+    auto pass = [&](const std::vector<float>& src, std::vector<float>& dst, bool rows) {
+      const int lines = rows ? sh : sw, length = rows ? sw : sh;
+      for (int line = 0; line < lines; ++line) {
+        for (int i = 0; i < length; ++i) {
+          const size_t s =
+              rows ? static_cast<size_t>(line) * sw + i : static_cast<size_t>(i) * sw + line;
+          std::copy_n(&src[6 * s], 6, &dst[6 * s]);
+          const float z = depth[s];
+          if (!(z > 0)) continue;
+          float acc[6] = {0, 0, 0, 0, 0, 0};
+          int n = 0;
+          for (int k = std::max(0, i - r); k <= std::min(length - 1, i + r); ++k) {
+            const size_t t =
+                rows ? static_cast<size_t>(line) * sw + k : static_cast<size_t>(k) * sw + line;
+            if (!(depth[t] > 0) || std::abs(depth[t] - z) > 0.03f * z) continue;
+            for (int c = 0; c < 6; ++c) acc[c] += src[6 * t + c];
+            ++n;
+          }
+          for (int c = 0; c < 6; ++c) dst[6 * s + c] = acc[c] / n;
+        }
+      }
+    };
+    pass(sample, tmp, true);
+    pass(tmp, sample, false);
   }
   // Full resolution on the window (bilinear between samples when step > 1; equal taps copied, so
   // an unchanged neighbourhood stays exactly 1 and 0).

@@ -91,6 +91,10 @@ struct DifferentialOptions {
   // Every step-th pixel of the window in x and y, the rest filled bilinearly from them (1 = every
   // pixel; 2 = OursFast-style, about 4x faster).
   int step = 1;
+  // Edge-aware separable box of this radius (samples) over the per-sample factors and I_i (real
+  // pixels with depth within 3 % only): SSDO's 32 jittered directions leave a per-pixel dither
+  // that a composite shows; 0 = none.
+  int smooth_radius = 2;
   DifferentialTone tone = DifferentialTone::kFixed;
   float key = 0.18f;     // kAverageKey: Reinhard's middle grey a
   int average_step = 8;  // kAverageKey: the log-averages over every 8th pixel in x and y
@@ -141,8 +145,8 @@ light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intri
 // scratch buffers; not re-entrant.
 class DifferentialRenderer {
  public:
-  // Throws LightError for invalid transfer options, RenderError for step < 1, key <= 0 or
-  // average_step < 1.
+  // Throws LightError for invalid transfer options, RenderError for step < 1, key <= 0,
+  // average_step < 1 or smooth_radius < 0.
   explicit DifferentialRenderer(const DifferentialOptions& options);
   ~DifferentialRenderer();
   DifferentialRenderer(const DifferentialRenderer&) = delete;
