@@ -19,6 +19,7 @@
 #include "probeless/calib/calibration.h"
 #include "probeless/dataset/datasets.h"
 #include "probeless/log/mcap_reader.h"
+#include "probeless/log/ros2.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/rectify/rectify.h"
 #include "probeless/sim/scenario.h"
@@ -90,6 +91,26 @@ void WriteFreiburg1Folder(const fs::path& dir, int frames) {
   std::fclose(truth_txt);
 }
 
+cv::Matx44d Matrix(const msgs::RigidTransform& t) {
+  const double w = t.rotation.w, x = t.rotation.x, y = t.rotation.y, z = t.rotation.z;
+  return {1 - 2 * (y * y + z * z),
+          2 * (x * y - w * z),
+          2 * (x * z + w * y),
+          t.translation.x,
+          2 * (x * y + w * z),
+          1 - 2 * (x * x + z * z),
+          2 * (y * z - w * x),
+          t.translation.y,
+          2 * (x * z - w * y),
+          2 * (y * z + w * x),
+          1 - 2 * (x * x + y * y),
+          t.translation.z,
+          0,
+          0,
+          0,
+          1};
+}
+
 TEST(RectifyLaunch, Freiburg1FolderPlaysThroughFusionAndSceneLight) {
   TempDir dir("rectify_launch");
   const fs::path folder = fs::path(dir.path()) / "rgbd_dataset_freiburg1_courtyard";
@@ -110,10 +131,35 @@ TEST(RectifyLaunch, Freiburg1FolderPlaysThroughFusionAndSceneLight) {
   EXPECT_NE(log.find("rectified 12 images and 12 depth images"), std::string::npos) << log;
 
   std::map<std::string, int> counts;
+  std::map<int64_t, cv::Matx44d> estimate, truth;  // by stamp, camera -> world
   const log::McapReader reader((out / "replay.mcap").string());
   log::MessageCursor cursor = reader.Messages();
   log::MessageView view;
-  while (cursor.Next(view)) ++counts[view.channel->topic];
+  while (cursor.Next(view)) {
+    const std::string& topic = view.channel->topic;
+    ++counts[topic];
+    if (topic != "/scene/pose" && topic != "/groundtruth/pose") continue;
+    const log::MessageBuffer m =
+        log::DecodeRos2(log::Ros2ConverterFor<msgs::Pose>(), view.data, view.channel->metadata);
+    const msgs::Pose& pose = *msgs::ReadMessage<msgs::Pose>(m.bytes());
+    (topic == "/scene/pose" ? estimate : truth)[pose.header.stamp_ns] = Matrix(pose.transform);
+  }
+  // The tracked poses follow the truth (ATE after aligning the first tracked pose).
+  ASSERT_FALSE(estimate.empty());
+  const int64_t first = estimate.begin()->first;
+  ASSERT_TRUE(truth.count(first));
+  const cv::Matx44d align = truth.at(first) * estimate.begin()->second.inv();
+  double sum2 = 0;
+  for (const auto& [stamp, e] : estimate) {
+    ASSERT_TRUE(truth.count(stamp)) << stamp;
+    const cv::Matx44d a = align * e, t = truth.at(stamp);
+    sum2 += std::pow(a(0, 3) - t(0, 3), 2) + std::pow(a(1, 3) - t(1, 3), 2) +
+            std::pow(a(2, 3) - t(2, 3), 2);
+  }
+  const double ate = std::sqrt(sum2 / static_cast<double>(estimate.size()));
+  std::printf("Freiburg 1 folder through replay.yaml: %zu poses, ATE %.4f m\n", estimate.size(),
+              ate);
+  EXPECT_LT(ate, 0.05);
   EXPECT_EQ(counts["/camera/camera_info"], kFrames);
   // Every frame but the first (it initialises the map) is tracked; scene_light lights them.
   EXPECT_GE(counts["/scene/pose"], kFrames - 1) << log;
