@@ -90,7 +90,8 @@ class Rectifier {
 
   // Rectifies `in` (header and size; pixels in `in_pixels`, in.step bytes per row) into `out`
   // (header copied, same size and encoding, packed step) and `out_pixels` (e.g. a loaned bus slot's
-  // payload; at least Image::PackedPayloadBytes bytes). rgb8, bgr8, mono8, mono16, rgb32f:
+  // payload; at least Image::PackedPayloadBytes bytes; must not overlap `in_pixels`: resampling
+  // reads neighbours of pixels already written). rgb8, bgr8, mono8, mono16, rgb32f:
   // bilinear; depth16, float32 (depth; 0 or non-finite = no measurement): options'
   // depth_interpolation. Pixels whose source falls outside the image are 0. Throws RectifyError
   // "<image_source>: ..." when the size differs from the calibration's (naming both sources), or
