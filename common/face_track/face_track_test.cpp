@@ -1,12 +1,18 @@
 // Unit tests of probeless_face_track on synthetic input: bad model paths, the generic 3-D model
 // and head pose, sampling validity cases, SH rotation, the light smoother following an on/off step
-// within 3 frames, and the JSON layouts.
+// within 3 frames, the JSON layouts, the ARKit / WebXR exports of a known linear light (directly
+// and through the face model and the linear conversion), and the hold of the last confident light
+// for a backlit face.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <numbers>
 #include <string>
 #include <vector>
 
+#include "probeless/face_light/estimator.h"
+#include "probeless/face_light/linear_light.h"
 #include "probeless/face_light/model.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/head_model.h"
@@ -284,6 +290,158 @@ TEST(LightOutput, JsonLayouts) {
       << json;
   const auto colour = LightColour(c);
   EXPECT_NEAR(colour[0] + colour[1] + colour[2], 3, 1e-5);
+}
+
+// The numbers after `key` in json: the arrays' values in order (nested brackets flattened).
+std::vector<double> NumbersAfter(const std::string& json, const std::string& key, size_t count) {
+  std::vector<double> out;
+  size_t at = json.find(key);
+  if (at == std::string::npos) return out;
+  at += key.size();
+  while (out.size() < count && at < json.size()) {
+    const char ch = json[at];
+    if (ch == '-' || (ch >= '0' && ch <= '9')) {
+      char* end = nullptr;
+      out.push_back(std::strtod(json.c_str() + at, &end));
+      at = static_cast<size_t>(end - json.c_str());
+    } else {
+      ++at;
+    }
+  }
+  return out;
+}
+
+// Real SH without the Condon-Shortley phase (ARKit / WebXR), order l(l+1)+m.
+std::array<double, 9> BasisWithoutPhase(double x, double y, double z) {
+  return {0.282095,
+          0.488603 * y,
+          0.488603 * z,
+          0.488603 * x,
+          1.092548 * x * y,
+          1.092548 * y * z,
+          0.315392 * (3 * z * z - 1),
+          1.092548 * x * z,
+          0.546274 * (x * x - y * y)};
+}
+
+// A directional light of power P_c from camera-frame direction d plus ambient radiance r_c
+// (msgs::ShLight units) in the camera frame.
+Sh9Rgb KnownLight(const sh::Vec3& d, const std::array<double, 3>& power,
+                  const std::array<double, 3>& ambient) {
+  const auto y = sh::Basis9(d);
+  Sh9Rgb c{};
+  for (int n = 0; n < 9; ++n) {
+    for (int ch = 0; ch < 3; ++ch) {
+      c[n][ch] = static_cast<float>(power[ch] * y[n] +
+                                    (n == 0 ? ambient[ch] * 2 * std::sqrt(std::numbers::pi) : 0));
+    }
+  }
+  return c;
+}
+
+// Checks the ARKit (planar) and WebXR (interleaved) arrays of `json` against the known light in
+// the y-up frame (x, -y, -z), relative L2 error per channel below `tolerance`.
+void ExpectExportsOf(const std::string& json, const sh::Vec3& d, const std::array<double, 3>& power,
+                     const std::array<double, 3>& ambient, double tolerance) {
+  const auto basis = BasisWithoutPhase(d[0], -d[1], -d[2]);
+  const std::vector<double> arkit = NumbersAfter(json, "\"arkit\":", 27);
+  const std::vector<double> webxr = NumbersAfter(json, "\"webxr\":", 27);
+  ASSERT_EQ(arkit.size(), 27u) << json;
+  ASSERT_EQ(webxr.size(), 27u) << json;
+  for (int ch = 0; ch < 3; ++ch) {
+    double diff_a = 0, diff_w = 0, norm = 0;
+    for (int n = 0; n < 9; ++n) {
+      const double truth =
+          power[ch] * basis[n] + (n == 0 ? ambient[ch] * 2 * std::sqrt(std::numbers::pi) : 0);
+      diff_a += (arkit[9 * ch + n] - truth) * (arkit[9 * ch + n] - truth);
+      diff_w += (webxr[3 * n + ch] - truth) * (webxr[3 * n + ch] - truth);
+      norm += truth * truth;
+    }
+    EXPECT_LT(std::sqrt(diff_a / norm), tolerance) << "ARKit channel " << ch << ": " << json;
+    EXPECT_LT(std::sqrt(diff_w / norm), tolerance) << "WebXR channel " << ch << ": " << json;
+  }
+}
+
+TEST(LightOutput, LinearExportsOfAKnownLight) {
+  const sh::Vec3 d{0.48, -0.36, -0.8};  // unit: up-right of the camera, in front of the face
+  const std::array<double, 3> power{2.4, 1.9, 1.3};
+  const std::array<double, 3> ambient{0.06, 0.05, 0.07};
+  // The export itself: exact to the printed precision.
+  const Sh9Rgb known = KnownLight(d, power, ambient);
+  ExpectExportsOf(
+      LightJson(known, {0.48f, -0.36f, -0.8f}, 1.87f, 0.6f, LightColour(known), 1, "camera"), d,
+      power, ambient, 1e-5);
+  // Through the face model and the linear conversion (frontal head: face frame = camera frame),
+  // the direction refined for the linear residual: within 3 %.
+  const fl::FaceLightModel model =
+      fl::LoadModel(std::string(PROBELESS_SOURCE_DIR) + "/data/face_light/default_model.txt");
+  fl::EstimatorOptions eo;
+  eo.back_prior = 0.1;
+  const fl::FaceLightEstimator estimator(model, eo);
+  fl::LinearLightOptions lo;
+  lo.refine_direction = true;
+  const fl::LinearLightConverter converter(model, lo);
+  const std::vector<float> rgb = converter.Predict(d, power, ambient);
+  const fl::LinearLight light = converter.Convert(rgb, {}, estimator.EstimateRgb(rgb));
+  ASSERT_TRUE(light.valid);
+  const Sh9Rgb camera = RotateSh9(light.coefficients, {1, 0, 0, 0, 1, 0, 0, 0, 1});
+  ExpectExportsOf(
+      LightJson(camera, light.direction, light.intensity, 0.6f, LightColour(camera), 1, "camera"),
+      d, power, ambient, 0.03);
+}
+
+// Irradiance (Lambertian, K&K eq. 20 / Ramamoorthi-Hanrahan) of channel-mean light at normal n.
+double Irradiance(const Sh9Rgb& c, const sh::Vec3& n) {
+  const auto y = sh::Basis9(n);
+  double e = 0;
+  for (int k = 0; k < 9; ++k) {
+    const int l = k == 0 ? 0 : k < 4 ? 1 : 2;
+    e += sh::ClampedCosineCoefficient(l) * y[k] * (c[k][0] + c[k][1] + c[k][2]) / 3;
+  }
+  return e;
+}
+
+TEST(LightHold, BacklitFaceDoesNotBrightenTheVirtualObject) {
+  LightHold hold;
+  const int64_t second = 1'000'000'000;
+  // Confident: a light from the side (camera +x), passed through and held.
+  const Sh9Rgb side = KnownLight({1, 0, 0}, {2, 2, 2}, {0.05, 0.05, 0.05});
+  const LightHold::Output a = hold.Update(side, {1, 0, 0}, 2, 0.6f, 10 * second);
+  EXPECT_FALSE(a.held);
+  EXPECT_EQ(a.coefficients, side);
+  // The light goes behind the head: the fit wrongly puts a bright light in front (towards the
+  // camera, -z) with a low confidence (expected error 120 deg).
+  const Sh9Rgb wrong = KnownLight({0, 0, -1}, {1.5, 1.5, 1.5}, {0.02, 0.02, 0.02});
+  // Normals of the virtual object facing the camera and the wrongly estimated light; the held
+  // light's ambient term alone.
+  const sh::Vec3 front{0, 0, -1};
+  Sh9Rgb side_ambient{};
+  side_ambient[0] = side[0];
+  double last = 1e9;
+  for (int k = 1; k <= 40; ++k) {
+    const LightHold::Output b =
+        hold.Update(wrong, {0, 0, -1}, 1.5, 0.007f, 10 * second + k * second / 10);
+    EXPECT_TRUE(b.held);
+    const double e = Irradiance(b.coefficients, front);
+    // Never brighter from the front than the held light or its ambient term, far below the wrong
+    // estimate, and fading monotonically towards that ambient term.
+    EXPECT_LE(e, std::max(Irradiance(side, front), Irradiance(side_ambient, front)) + 1e-6);
+    EXPECT_LT(e, 0.5 * Irradiance(wrong, front));
+    EXPECT_LE(b.coefficients[3][0] * b.coefficients[3][0], side[3][0] * side[3][0] + 1e-9);
+    EXPECT_LE(std::abs(b.coefficients[3][0]), last + 1e-9);
+    last = std::abs(b.coefficients[3][0]);
+    EXPECT_FLOAT_EQ(b.coefficients[0][0], side[0][0]);
+    if (k == 20) EXPECT_NEAR(b.weight, std::exp(-1.0), 1e-6);  // 2 s = blend_time_s
+    for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(b.direction[ch], ch == 0 ? 1.f : 0.f);
+  }
+  // Without a held light: only the unreliable light's ambient term.
+  LightHold fresh;
+  const LightHold::Output c = fresh.Update(wrong, {0, 0, -1}, 1.5, 0.007f, second);
+  EXPECT_TRUE(c.held);
+  EXPECT_FLOAT_EQ(c.coefficients[0][1], wrong[0][1]);
+  for (int n = 1; n < 9; ++n) EXPECT_EQ(c.coefficients[n][0], 0.f);
+  EXPECT_EQ(ErrorOf([] { LightHold bad(HoldOptions{.min_confidence = 0.1, .blend_time_s = 0}); }),
+            "LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
 }
 
 }  // namespace

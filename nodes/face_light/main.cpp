@@ -3,16 +3,22 @@
 // optionally smoothed, exported as JSON (docs/face_light.md, "face_light node").
 //
 // Subscribes `face/observation` (msgs::FaceObservation); publishes `face/light` (msgs::ShLight,
-// header and frame of the observation = the camera frame) for every observation with a face and
-// enough valid samples. A lock-step player can name this node although it subscribes no played
-// topic: the player waits until the whole chain is idle (docs/replay.md).
+// header and frame of the observation = the camera frame, linear radiance: the model's estimate
+// converted by face_light::LinearLightConverter with the skin albedo compensated; confidence on
+// the ShLight scale from the calibrated expected error) for every observation with a face and
+// enough valid samples; a light below hold_confidence (unlit, backlit face) is replaced by the
+// last confident one blending towards its ambient term (face_track::LightHold). A lock-step player
+// can name this node although it subscribes no played topic: the player waits until the whole chain
+// is idle (docs/replay.md).
 //
 // Params: model (default data/face_light/default_model.txt, resolved like face_tracker's
 // sample_model), mode (rgb | gray), back_prior (0.1), ridge, robust, non_negative, weight_floor,
 // directional_fit (true: dominant direction by the directional-light fit), directional_robust (0),
 // smoothing (true), smoothing_alpha (0.3), change_threshold (0.35), json_path ("" = none),
 // json_mode (frame: one JSON line per estimate appended to json_path | exit: the last estimate
-// written on exit).
+// written on exit), linear_output (true; false = the model's compressed units, no hold),
+// skin_albedo ([0.47, 0.32, 0.25] linear RGB), unit_scale (0.223), hold_confidence (0.1),
+// hold_blend_s (2.0).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or model (one line on stderr), 1 otherwise.
 #include "probeless/node/main.h"
 
@@ -22,10 +28,12 @@
 #include <string>
 
 #include "probeless/face_light/estimator.h"
+#include "probeless/face_light/linear_light.h"
 #include "probeless/face_light/model.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/head_model.h"
 #include "probeless/face_track/light_output.h"
+#include "probeless/light/fusion.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 
@@ -75,8 +83,32 @@ int Run(int argc, char** argv) {
     throw node::UsageError("face_light: json_mode must be frame or exit, got '" + json_mode + "'");
   }
 
+  const bool linear_output = node.Param("linear_output", true);
+  fl::LinearLightOptions lo;
+  const std::vector<double> albedo =
+      node.Param("skin_albedo", std::vector<double>(lo.skin_albedo.begin(), lo.skin_albedo.end()));
+  if (albedo.size() != 3) {
+    throw node::UsageError("face_light: skin_albedo must hold 3 values (linear R, G, B), got " +
+                           std::to_string(albedo.size()));
+  }
+  std::copy(albedo.begin(), albedo.end(), lo.skin_albedo.begin());
+  lo.unit_scale = node.Param("unit_scale", lo.unit_scale);
+  ft::HoldOptions ho;
+  ho.min_confidence = node.Param("hold_confidence", ho.min_confidence);
+  ho.blend_time_s = node.Param("hold_blend_s", ho.blend_time_s);
+  if (!(ho.min_confidence >= 0 && ho.min_confidence <= 1) || !(ho.blend_time_s > 0)) {
+    throw node::UsageError("face_light: hold_confidence must be in [0, 1] and hold_blend_s > 0");
+  }
+
   const fl::FaceLightModel model = fl::LoadModel(model_path);
   const fl::FaceLightEstimator estimator(model, eo);
+  std::optional<fl::LinearLightConverter> converter;
+  try {
+    converter.emplace(model, lo);
+  } catch (const fl::FaceLightError& e) {
+    throw node::UsageError(std::string("face_light: ") + e.what());
+  }
+  ft::LightHold hold(ho);
   ft::LightSmoother smoother(so);
   std::ofstream json;
   if (!json_path.empty() && json_mode == "frame") {
@@ -119,16 +151,45 @@ int Run(int argc, char** argv) {
       smoother.Miss();
       return;
     }
+    float confidence = e.confidence * obs->quality;
+    if (linear_output) {
+      // The model's compressed units -> linear radiance, the skin albedo compensated; the
+      // confidence from the cues' calibrated expected error (docs/face_light.md, "Confidence").
+      // The tracking quality is left out: it is not calibrated against the light's error (0-0.7
+      // on Yale B crops whose estimates are good).
+      const fl::LinearLight linear =
+          converter->Convert({&obs->sample_rgb[0][0], gray.size() * 3}, valid, e);
+      if (!linear.valid) {
+        smoother.Miss();
+        return;
+      }
+      confidence = static_cast<float>(
+          light::ConfidenceFromExpectedError(fl::FaceLightExpectedErrorDeg(linear)));
+      e.channels = 3;
+      e.coefficients = linear.coefficients;
+      e.dominant_direction = linear.direction;
+      e.intensity = linear.intensity;
+    }
+    e.confidence = confidence;
     e = smoother.Update(e);
+    confidence = e.confidence;
     // Face frame -> camera frame.
     const auto& q = obs->head_pose.rotation;
     std::array<double, 9> r{1, 0, 0, 0, 1, 0, 0, 0, 1};
     if (q.w != 0 || q.x != 0 || q.y != 0 || q.z != 0) {
       r = ft::MatrixFromQuaternion({q.w, q.x, q.y, q.z});
     }
-    const ft::Sh9Rgb camera = ft::RotateSh9(e.coefficients, r);
-    const std::array<float, 3> direction = ft::RotateVector(r, e.dominant_direction);
-    const float confidence = e.confidence * obs->quality;
+    ft::Sh9Rgb camera = ft::RotateSh9(e.coefficients, r);
+    std::array<float, 3> direction = ft::RotateVector(r, e.dominant_direction);
+    float intensity = e.intensity;
+    if (linear_output) {
+      // An unlit or backlit face: the last confident light, fading to its ambient term.
+      const ft::LightHold::Output held =
+          hold.Update(camera, direction, intensity, confidence, obs->header.stamp_ns);
+      camera = held.coefficients;
+      direction = held.direction;
+      intensity = held.intensity;
+    }
 
     bus::Loan loan = lights.Borrow(sizeof(msgs::ShLight));
     auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
@@ -139,12 +200,12 @@ int Run(int argc, char** argv) {
       for (int c = 0; c < 3; ++c) out->coefficients[n][c] = camera[n][c];
     }
     for (int k = 0; k < 3; ++k) out->dominant_direction[k] = direction[k];
-    out->intensity = e.intensity;
+    out->intensity = intensity;
     out->confidence = std::clamp(confidence, 0.f, 1.f);
     lights.Publish(std::move(loan));
     ++published;
     if (!json_path.empty()) {
-      last_json = ft::LightJson(camera, direction, e.intensity, std::clamp(confidence, 0.f, 1.f),
+      last_json = ft::LightJson(camera, direction, intensity, std::clamp(confidence, 0.f, 1.f),
                                 ft::LightColour(camera), obs->header.stamp_ns,
                                 std::string(obs->header.FrameId()));
       if (json_mode == "frame") json << last_json << '\n' << std::flush;

@@ -263,7 +263,7 @@ double FaceLightScore(const LinearLight& light) {
   return std::min(r2, direct);
 }
 
-double FaceLightExpectedErrorDeg(const LinearLight& light, double quality) {
+double FaceLightExpectedErrorDeg(const LinearLight& light) {
   if (!light.valid) return 180;
   // RMS angular error per score bin, both Yale B folds (odd / even trained, tested on the other)
   // and 4 simulated subjects under 92 lights (28 behind the head), 2078 estimates:
@@ -287,7 +287,7 @@ double FaceLightExpectedErrorDeg(const LinearLight& light, double quality) {
       break;
     }
   }
-  return std::min(180.0, error / std::max(0.05, std::min(1.0, quality)));
+  return error;
 }
 
 }  // namespace probeless::face_light

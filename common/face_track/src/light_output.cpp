@@ -1,9 +1,11 @@
 #include "probeless/face_track/light_output.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <opencv2/core.hpp>
 #include <span>
+#include <stdexcept>
 
 #include "probeless/sh/sh.h"
 
@@ -122,6 +124,46 @@ fl::LightEstimate LightSmoother::Update(const fl::LightEstimate& estimate) {
   state_.rms_residual = estimate.rms_residual;
   Derive(state_);
   return state_;
+}
+
+LightHold::LightHold(const HoldOptions& options) : options_(options) {
+  if (!(options_.min_confidence >= 0 && options_.min_confidence <= 1) ||
+      !(options_.blend_time_s > 0)) {
+    throw std::invalid_argument("LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
+  }
+}
+
+LightHold::Output LightHold::Update(const Sh9Rgb& coefficients,
+                                    const std::array<float, 3>& direction, float intensity,
+                                    float confidence, int64_t stamp_ns) {
+  Output out;
+  if (confidence >= options_.min_confidence) {
+    has_light_ = true;
+    held_ = coefficients;
+    direction_ = direction;
+    intensity_ = intensity;
+    stamp_ns_ = stamp_ns;
+    out.coefficients = coefficients;
+    out.direction = direction;
+    out.intensity = intensity;
+    return out;
+  }
+  out.held = true;
+  if (!has_light_) {
+    // Nothing trustworthy yet: the environment part only, no direction.
+    for (int c = 0; c < 3; ++c) out.coefficients[0][c] = coefficients[0][c];
+    out.weight = 0;
+    return out;
+  }
+  const double age_s = std::max<int64_t>(0, stamp_ns - stamp_ns_) * 1e-9;
+  out.weight = std::exp(-age_s / options_.blend_time_s);
+  const float w = static_cast<float>(out.weight);
+  for (int n = 0; n < 9; ++n) {
+    for (int c = 0; c < 3; ++c) out.coefficients[n][c] = n == 0 ? held_[0][c] : w * held_[n][c];
+  }
+  if (w > 0) out.direction = direction_;
+  out.intensity = w * intensity_;
+  return out;
 }
 
 Sh9Rgb ToYUpFrame(const Sh9Rgb& c) {

@@ -108,9 +108,8 @@ class LinearLightConverter {
 // fit explains the face no better than its mean, or the direct light explains less than 40 % of
 // it: unlit, backlit) mapped through a piecewise-linear table fitted on held-out Yale B subjects
 // and simulated faces with lights all round (docs/face_light.md, "Confidence"; 120 deg at s = 0,
-// 6.5 deg at s = 1), divided by the tracking quality (clamped to >= 0.05; not calibrated).
-// 180 for an invalid light.
-double FaceLightExpectedErrorDeg(const LinearLight& light, double quality = 1);
+// 6.5 deg at s = 1). 180 for an invalid light.
+double FaceLightExpectedErrorDeg(const LinearLight& light);
 
 // The score above, in [0, 1].
 double FaceLightScore(const LinearLight& light);

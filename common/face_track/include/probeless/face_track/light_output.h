@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstdint>
 #include <string>
 
 #include "probeless/face_light/estimator.h"
@@ -56,6 +57,46 @@ class LightSmoother {
   bool last_jumped_ = false;
   int gap_ = 0;
   face_light::LightEstimate state_;
+};
+
+struct HoldOptions {
+  // A light with confidence below this (msgs::ShLight scale; 0.1 = an expected error of 30 deg:
+  // an unlit or backlit face) is not followed.
+  double min_confidence = 0.1;
+  // Time constant of the held light's blend towards its ambient term, seconds (> 0).
+  double blend_time_s = 2.0;
+};
+
+// What to publish for an unreliable face light (beyond the paper): while the face is unlit or
+// backlit, the fit's direction is wrong (it puts the light in front, ~135 deg off) and would light
+// a virtual object from the front. LightHold passes confident lights through and remembers the
+// last one, H; for a light below HoldOptions::min_confidence it returns A + w (H - A), A = H's
+// ambient term (band 0 only), w = exp(-(t - t_H) / blend_time_s), t_H the stamp of H: the
+// object keeps the last trustworthy light and fades to its environment, never brighter than H
+// from any direction it had no light from. Without a held light: the unreliable light's own
+// ambient term. Coefficients in the camera frame, linear (msgs::ShLight units).
+class LightHold {
+ public:
+  struct Output {
+    Sh9Rgb coefficients{};
+    std::array<float, 3> direction{};  // H's direction while w > 0, else (0, 0, 0)
+    float intensity = 0;               // w x H's intensity
+    bool held = false;                 // the input was below min_confidence
+    double weight = 1;                 // w (1 for a confident input)
+  };
+  // Throws std::invalid_argument unless 0 <= min_confidence <= 1 and blend_time_s > 0.
+  explicit LightHold(const HoldOptions& options = {});
+  Output Update(const Sh9Rgb& coefficients, const std::array<float, 3>& direction, float intensity,
+                float confidence, int64_t stamp_ns);
+  bool has_light() const { return has_light_; }
+
+ private:
+  HoldOptions options_;
+  bool has_light_ = false;
+  Sh9Rgb held_{};
+  std::array<float, 3> direction_{};
+  float intensity_ = 0;
+  int64_t stamp_ns_ = 0;
 };
 
 // One light as JSON (one line, no trailing newline):
