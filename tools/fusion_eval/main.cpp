@@ -416,6 +416,14 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
     options.normal_source =
         std::string(ns) == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
   }
+  if (const char* ob = std::getenv("FUSION_EVAL_OBSERVABILITY")) {  // good,soft,hard
+    recon::TrackingQualityOptions& q = options.quality;
+    if (std::sscanf(ob, "%f,%f,%f", &q.observability_good, &q.observability_soft,
+                    &q.observability_hard) != 3) {
+      throw UsageError("FUSION_EVAL_OBSERVABILITY must be good,soft,hard, got '" + std::string(ob) +
+                       "'");
+    }
+  }
   if (const char* nb = std::getenv("FUSION_EVAL_NORMAL_BLOCK")) {
     options.volume_normal_block = std::atoi(nb);
   }
@@ -429,7 +437,9 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   std::vector<double> total, pre, icp, integ, ray, mrg, cpu;
   std::vector<double> pre_cpu, icp_cpu, integ_cpu, ray_cpu, mrg_cpu;
   std::vector<recon::Pose> est, truth;
-  int lost = 0;
+  int lost = 0, uncertain = 0, relocalised = 0;
+  float min_observability = 1e9f, max_motion_m = 0, max_motion_deg = 0, max_residual_ratio = 0,
+        min_inlier_ratio = 1e9f, min_score = 1;
   for (const Frame& f : frames) {
     const recon::GreyImage* grey =
         (f.grey.width == f.depth.width && f.grey.height == f.depth.height) ? &f.grey : nullptr;
@@ -437,6 +447,17 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
     const recon::FrameResult r = pipeline.Process(f.depth, k, grey);
     cpu.push_back(CpuMs() - cpu0);
     lost += r.state == recon::TrackingState::kLost;
+    uncertain += r.state == recon::TrackingState::kUncertain;
+    relocalised += r.relocalised;
+    if (r.icp.pairs > 0) {
+      const recon::TrackingQuality& q = r.quality;
+      min_score = std::min(min_score, q.score);
+      min_observability = std::min(min_observability, q.observability);
+      max_motion_m = std::max(max_motion_m, q.motion_translation_m);
+      max_motion_deg = std::max(max_motion_deg, q.motion_rotation_deg);
+      max_residual_ratio = std::max(max_residual_ratio, q.residual_ratio);
+      if (q.inlier_ratio > 0) min_inlier_ratio = std::min(min_inlier_ratio, q.inlier_ratio);
+    }
     if (verbose) {
       const recon::Vec3f t = r.camera_to_world.Translation();
       const recon::Pose g = frames[0].truth.Inverse() * f.truth;
@@ -451,10 +472,15 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       const recon::Vec3f fwd{static_cast<float>(rot_err), 0, 0};
       std::fprintf(stderr,
                    "frame %zu: %s inliers %.3f rms %.4f pose %.3f %.3f %.3f truth %.3f %.3f %.3f "
-                   "fwd %.2f %.2f %.2f depth %.2f/%.2f/%.2f %s\n",
+                   "fwd %.2f %.2f %.2f depth %.2f/%.2f/%.2f %s | %s score %.3f obs %.4f motion "
+                   "%.4f m %.3f deg residual x%.2f inliers x%.2f %s\n",
                    est.size(), r.state == recon::TrackingState::kLost ? "LOST" : "ok",
                    r.icp.inlier_fraction, r.icp.rms_m, t.x, t.y, t.z, g.t[0], g.t[1], g.t[2], fwd.x,
-                   fwd.y, fwd.z, d10, d50, d90, r.icp.failure.c_str());
+                   fwd.y, fwd.z, d10, d50, d90, r.icp.failure.c_str(),
+                   std::string(recon::TrackingStateName(r.state)).c_str(), r.quality.score,
+                   r.quality.observability, r.quality.motion_translation_m,
+                   r.quality.motion_rotation_deg, r.quality.residual_ratio, r.quality.inlier_ratio,
+                   r.quality.text.c_str());
     }
     total.push_back(r.timings.total_ms);
     pre.push_back(r.timings.preprocess_ms);
@@ -480,6 +506,15 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       {"ate_aligned_rmse_m", ate_aligned.rmse},
       {"ate_aligned_max_m", ate_aligned.max},
       {"tracking_lost", static_cast<double>(lost)},
+      {"tracking_uncertain", static_cast<double>(uncertain)},
+      {"tracking_relocalised", static_cast<double>(relocalised)},
+      // The tracking-quality cues' extremes over the tracked frames (recon/tracking_quality.h).
+      {"quality_min_score", min_score},
+      {"quality_min_observability", min_observability},
+      {"quality_max_motion_m", max_motion_m},
+      {"quality_max_motion_deg", max_motion_deg},
+      {"quality_max_residual_ratio", max_residual_ratio},
+      {"quality_min_inlier_ratio", min_inlier_ratio},
       {"ms_per_frame_median", Median(total)},
       {"ms_preprocess_median", Median(pre)},
       {"ms_icp_median", Median(icp)},

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 namespace probeless::recon {
 
@@ -77,6 +78,44 @@ bool SolveCholesky(const double a_upper[21], const double b[6], double x[6], dou
 }
 
 constexpr int kTasks = 16;
+
+// The point-to-plane normal matrix of the frame's own geometry, one pair per block x block
+// pixels: the block's mean point and its renormalised mean normal (blocks with fewer than half
+// of their pixels valid, or whose normals cancel - a crease - are skipped). Averaging divides the
+// normals' noise variance, which otherwise shows as a constraint in every direction (a floor and
+// a wall seen through Kinect-like noise look as constrained along their intersection as a real
+// kitchen's weakest direction), while piecewise-planar geometry keeps its normals.
+void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, IcpResult& out) {
+  std::fill(std::begin(out.normal_equations), std::end(out.normal_equations), 0.0);
+  out.pairs = 0;
+  double depth_sum = 0;
+  const int bw = vs.width / block, bh = vs.height / block;
+  for (int by = 0; by < bh; ++by)
+    for (int bx = 0; bx < bw; ++bx) {
+      Vec3f p{}, n{};
+      int count = 0;
+      for (int y = by * block; y < (by + 1) * block; ++y)
+        for (int x = bx * block; x < (bx + 1) * block; ++x) {
+          const Vec3f v = vs.At(x, y), nv = ns.At(x, y);
+          if (v.z <= 0 || (nv.x == 0 && nv.y == 0 && nv.z == 0)) continue;
+          p = p + v;
+          n = n + nv;
+          ++count;
+        }
+      if (2 * count < block * block) continue;
+      p = (1.0f / count) * p;
+      if (Norm(n) < 0.5f * count) continue;
+      n = Normalized(n);
+      const Vec3f c = Cross(p, n);
+      const double j[6] = {c.x, c.y, c.z, n.x, n.y, n.z};
+      int idx = 0;
+      for (int i0 = 0; i0 < 6; ++i0)
+        for (int i1 = i0; i1 < 6; ++i1) out.normal_equations[idx++] += j[i0] * j[i1];
+      depth_sum += p.z;
+      ++out.pairs;
+    }
+  out.mean_depth_m = out.pairs > 0 ? static_cast<float>(depth_sum / out.pairs) : 0.0f;
+}
 }  // namespace
 
 IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const Pose& initial,
@@ -107,6 +146,8 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
   Accum last;
   int valid0 = 0;
   for (const Vec3f& v : frame.vertices[offset].data) valid0 += v.z > 0;
+  FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
+                       result);
   for (int l = levels - 1; l >= 0; --l) {
     const Vec3Image& vs = frame.vertices[offset + l];
     const Vec3Image& ns = frame.normals[offset + l];

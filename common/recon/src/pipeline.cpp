@@ -43,9 +43,17 @@ void FusionOptions::Validate() const {
   if (!(preprocess.depth_min_m >= 0) || !(preprocess.depth_max_m > preprocess.depth_min_m)) {
     throw ReconError("fusion: need 0 <= depth_min_m < depth_max_m");
   }
+  quality.Validate();
+  if (!(relocalise_max_distance_m > 0)) {
+    throw ReconError("fusion: relocalise_max_distance_m must be > 0");
+  }
+  if (!(relocalise_max_extrapolation_s >= 0)) {
+    throw ReconError("fusion: relocalise_max_extrapolation_s must be >= 0");
+  }
 }
 
-FusionPipeline::FusionPipeline(const FusionOptions& options) : options_(options) {
+FusionPipeline::FusionPipeline(const FusionOptions& options)
+    : options_(options), monitor_(options.quality) {
   options_.Validate();
   options_.preprocess.first_level = options_.track_level;
   pool_ = std::make_unique<ThreadPool>(options_.threads);
@@ -59,6 +67,72 @@ void FusionPipeline::Reset() {
   volume_->Reset();
   state_ = TrackingState::kEmpty;
   pose_ = options_.initial_pose;
+  monitor_.Reset();
+  uncertain_run_ = 0;
+  since_good_s_ = 0;
+  last_stamp_ns_ = 0;
+}
+
+void FusionPipeline::Track(double interval_s, FrameResult& r) {
+  const double dt = interval_s > 0 ? interval_s : options_.quality.nominal_frame_interval_s;
+  if (state_ != TrackingState::kLost) {
+    r.icp = TrackIcp(frame_, model_, pose_, options_.icp, pool_.get());
+    r.quality = monitor_.Assess(r.icp, pose_, interval_s, false, uncertain_run_);
+    if (r.quality.state == TrackingState::kTracking) {
+      monitor_.Accept(r.icp, pose_, r.icp.camera_to_world, interval_s);
+      pose_ = r.icp.camera_to_world;
+      uncertain_run_ = 0;
+    } else if (r.quality.state == TrackingState::kUncertain) {
+      // Doubtful: keep tracking from the estimate, but it must not enter the map.
+      pose_ = r.icp.camera_to_world;
+      ++uncertain_run_;
+    } else {
+      pose_ = model_.camera_to_world;  // the last good pose
+      uncertain_run_ = 0;
+    }
+    state_ = r.quality.state;
+    since_good_s_ = state_ == TrackingState::kTracking ? 0.0 : since_good_s_ + dt;
+    return;
+  }
+  // Relocalisation against the model raycast from the last good pose, from that pose and from
+  // its constant-velocity extrapolation (a camera that kept moving during the loss): a wide
+  // association gate with twice the coarse iterations first, then the normal gate from there.
+  since_good_s_ += dt;
+  const Pose& good = model_.camera_to_world;
+  const double elapsed = std::min(since_good_s_, options_.relocalise_max_extrapolation_s);
+  const Pose candidates[2] = {good, monitor_.Predict(good, elapsed)};
+  const Pose moved = good.Inverse() * candidates[1];
+  const bool distinct = std::sqrt(moved.t[0] * moved.t[0] + moved.t[1] * moved.t[1] +
+                                  moved.t[2] * moved.t[2]) > 0.005 ||
+                        moved.RotationAngle() > 0.5 * 3.14159265358979 / 180;
+  IcpOptions wide = options_.icp;
+  wide.max_distance_m = std::max(wide.max_distance_m, options_.relocalise_max_distance_m);
+  for (size_t l = 1; l < wide.iterations.size(); ++l) wide.iterations[l] *= 2;
+  bool have = false;
+  for (int c = 0; c < (distinct ? 2 : 1); ++c) {
+    const IcpResult coarse = TrackIcp(frame_, model_, candidates[c], wide, pool_.get());
+    IcpResult fine = TrackIcp(frame_, model_, coarse.ok ? coarse.camera_to_world : candidates[c],
+                              options_.icp, pool_.get());
+    const TrackingQuality q = monitor_.Assess(fine, good, elapsed, true, 0);
+    const bool better =
+        !have || (q.state == TrackingState::kTracking &&
+                  (r.quality.state != TrackingState::kTracking || fine.rms_m < r.icp.rms_m));
+    if (better) {
+      r.icp = fine;
+      r.quality = q;
+      have = true;
+    }
+  }
+  if (r.quality.state == TrackingState::kTracking) {
+    pose_ = r.icp.camera_to_world;
+    state_ = TrackingState::kTracking;
+    r.relocalised = true;
+    monitor_.ForgetVelocity();  // the motion across the loss is unknown
+    since_good_s_ = 0;
+  } else {
+    pose_ = good;
+  }
+  uncertain_run_ = 0;
 }
 
 FrameResult FusionPipeline::ProcessDepth16(const uint16_t* depth_mm, int width, int height,
@@ -76,7 +150,8 @@ FrameResult FusionPipeline::ProcessDepth16(const uint16_t* depth_mm, int width, 
 }
 
 FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& intrinsics,
-                                    const GreyImage* intensity, const Pose* known_pose) {
+                                    const GreyImage* intensity, const Pose* known_pose,
+                                    int64_t stamp_ns) {
   intrinsics.Validate("fusion");
   if (depth.Empty()) throw ReconError("fusion: empty depth image");
   if (depth.width != intrinsics.width || depth.height != intrinsics.height) {
@@ -103,32 +178,25 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
   r.timings.preprocess_ms = MsSince(t);
   r.timings.preprocess_cpu_ms = CpuMs() - c;
 
-  bool integrate = true;
-  if (known_pose != nullptr) {
-    pose_ = *known_pose;
+  const double interval_s = stamp_ns > 0 && last_stamp_ns_ > 0 && stamp_ns > last_stamp_ns_
+                                ? (stamp_ns - last_stamp_ns_) * 1e-9
+                                : 0.0;
+  if (stamp_ns > 0) last_stamp_ns_ = stamp_ns;
+  if (known_pose != nullptr || state_ == TrackingState::kEmpty) {
+    pose_ = known_pose != nullptr ? *known_pose : pose_;
     state_ = TrackingState::kTracking;
-  } else if (state_ != TrackingState::kEmpty) {
+    r.quality.state = TrackingState::kTracking;
+    r.quality.score = 1;
+    uncertain_run_ = 0;
+    since_good_s_ = 0;
+  } else {
     t = std::chrono::steady_clock::now();
     c = CpuMs();
-    IcpOptions icp = options_.icp;
-    if (state_ == TrackingState::kLost) {
-      // Relocalisation against the model from the last good pose: more coarse iterations.
-      for (size_t l = 1; l < icp.iterations.size(); ++l) icp.iterations[l] *= 2;
-    }
-    r.icp = TrackIcp(frame_, model_, pose_, icp, pool);
+    Track(interval_s, r);
     r.timings.icp_ms = MsSince(t);
     r.timings.icp_cpu_ms = CpuMs() - c;
-    if (r.icp.ok) {
-      r.relocalised = state_ == TrackingState::kLost;
-      pose_ = r.icp.camera_to_world;
-      state_ = TrackingState::kTracking;
-    } else {
-      state_ = TrackingState::kLost;
-      integrate = false;
-    }
-  } else {
-    state_ = TrackingState::kTracking;
   }
+  const bool integrate = state_ == TrackingState::kTracking;
   r.camera_to_world = pose_;
   r.state = state_;
 
@@ -160,8 +228,8 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
     r.timings.raycast_ms = MsSince(t);
     r.timings.raycast_cpu_ms = CpuMs() - c;
   } else {
-    // Lost: the model stays the raycast from the last good pose (for relocalisation); D_v of
-    // this view is unknown.
+    // Uncertain or lost: the model stays the raycast from the last good pose (for tracking and
+    // relocalisation); D_v of this view is not trusted.
     volume_depth_.Resize(intrinsics.width, intrinsics.height);
     std::fill(volume_depth_.data.begin(), volume_depth_.data.end(), 0.0f);
   }

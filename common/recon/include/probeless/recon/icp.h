@@ -27,6 +27,8 @@ struct IcpOptions {
   float max_translation_m = 0.20f;
   float max_rotation_deg = 20.0f;
   float min_condition = 1e-5f;  // smallest / largest pivot of the Cholesky factorisation
+  // Pixels (at the tracking level) per side of the blocks of IcpResult::normal_equations.
+  int observability_block = 8;
 };
 
 // The model to track against: a raycast view (points and normals in that view's camera frame)
@@ -45,6 +47,15 @@ struct IcpResult {
   float rms_m = 0;            // level 0, point-to-plane
   int iterations = 0;         // total iterations run
   std::string failure;        // why !ok, e.g. "too few correspondences (0.12 < 0.25)"
+  // The point-to-plane normal matrix of the frame's level-0 geometry, one pair per
+  // IcpOptions::observability_block^2 pixels (the block's mean point p, metres, frame camera,
+  // and its renormalised mean normal n; blocks less than half valid are skipped): upper triangle
+  // (row-major, 21 values) of J^T J with J = (p x n, n), the block count and the blocks' mean
+  // depth (metres). The inputs of IcpObservability (tracking_quality.h); averaging keeps the
+  // normals' noise from posing as a constraint.
+  double normal_equations[21] = {};
+  int pairs = 0;
+  float mean_depth_m = 0;
 };
 
 // Builds the model pyramid from a raycast view (levels subsample every 2nd pixel).

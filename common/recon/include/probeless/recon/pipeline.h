@@ -1,9 +1,11 @@
 // The reconstruction pipeline of one camera stream (Gruber et al. 2015 §4 on KinectFusion):
 // preprocess the depth, track the camera against the volume (ICP), integrate the depth into the
 // TSDF volume, raycast G_v in the current view, and merge raw and volume depth into G_r
-// (eq. 1-5). On a failed tracking-quality test it stops integrating, reports the loss, keeps the
-// last good pose and tries to relocalise every following frame against the model raycast from
-// that pose; Reset() starts a new map.
+// (eq. 1-5). Every tracked frame passes the tracking-quality test (tracking_quality.h): an
+// uncertain frame keeps its pose but is not integrated; a lost one is not integrated, reports the
+// last good pose, and every following frame tries to relocalise against the model raycast from
+// that pose (the last good pose and its constant-velocity extrapolation, a wide then a normal
+// association gate) until a candidate passes the test as tracked; Reset() starts a new map.
 #pragma once
 
 #include <cstdint>
@@ -15,6 +17,7 @@
 #include "probeless/recon/math.h"
 #include "probeless/recon/preprocess.h"
 #include "probeless/recon/thread_pool.h"
+#include "probeless/recon/tracking_quality.h"
 #include "probeless/recon/tsdf_volume.h"
 
 namespace probeless::recon {
@@ -29,6 +32,12 @@ struct FusionOptions {
   VolumeOptions volume;  // in the world frame, see initial_pose
   PreprocessOptions preprocess;
   IcpOptions icp;
+  TrackingQualityOptions quality;  // the tracking-quality test after ICP
+  // Relocalisation: association gate of the first (wide) ICP pass from each candidate, metres
+  // (the second pass uses icp.max_distance_m), and the longest extrapolation of the last
+  // velocity across a loss, seconds.
+  float relocalise_max_distance_m = 0.20f;
+  double relocalise_max_extrapolation_s = 0.5;
   MergeOptions merge;
   bool merge_enabled = true;  // false: skip eq. 1-5 (G_r = nothing)
   // Pyramid level of tracking and of the model raycast: 0 = full resolution, 1 = half (default:
@@ -58,12 +67,6 @@ struct FusionOptions {
   void Validate() const;
 };
 
-enum class TrackingState {
-  kEmpty,     // no map yet (next frame initialises it)
-  kTracking,  // the last frame was tracked and integrated
-  kLost,      // the last frame failed the tracking-quality test (not integrated)
-};
-
 // Milliseconds spent in each stage of one frame: wall clock, and process CPU time.
 struct FrameTimings {
   double preprocess_ms = 0;  // mm -> m, bilateral filter, pyramid, vertex/normal maps
@@ -82,11 +85,17 @@ struct FrameTimings {
 };
 
 struct FrameResult {
-  Pose camera_to_world;  // the tracked pose, or the last good pose when lost
-  TrackingState state = TrackingState::kEmpty;
-  bool integrated = false;   // the depth was fused into the volume
+  // The tracked pose; the doubtful estimate when uncertain; the last good (integrated) pose when
+  // lost.
+  Pose camera_to_world;
+  TrackingState state = TrackingState::kEmpty;  // = quality.state
+  bool integrated = false;   // the depth was fused into the volume (tracked frames only)
   bool relocalised = false;  // tracking resumed after a loss on this frame
-  IcpResult icp;             // empty on the first frame
+  IcpResult icp;             // empty on the first frame and with a known pose; when lost, the
+                             // best relocalisation attempt
+  // The verdict of the tracking-quality test: kTracking with score 1 on the first frame and with
+  // a known pose.
+  TrackingQuality quality;
   FrameTimings timings;
 };
 
@@ -100,9 +109,12 @@ class FusionPipeline {
   // optional grey intensity image of the same size registered to the depth (nullptr: no colour
   // guidance, every lambda_I test passes). `known_pose` (camera -> world), when given, replaces
   // tracking (external tracking or ground truth). Throws ReconError for empty or mismatched
-  // inputs or invalid intrinsics (the pipeline state is unchanged then).
+  // inputs or invalid intrinsics (the pipeline state is unchanged then). `stamp_ns`, when > 0
+  // (nanoseconds, any clock, increasing), gives the motion test the interval since the previous
+  // frame; 0 = frames are nominal_frame_interval_s apart (TrackingQualityOptions).
   FrameResult Process(const DepthImage& depth, const Intrinsics& intrinsics,
-                      const GreyImage* intensity, const Pose* known_pose = nullptr);
+                      const GreyImage* intensity, const Pose* known_pose = nullptr,
+                      int64_t stamp_ns = 0);
   // Same from depth16 millimetres (`stride_elements` per row, `metres_per_unit` 0.001).
   FrameResult ProcessDepth16(const uint16_t* depth_mm, int width, int height,
                              size_t stride_elements, double metres_per_unit,
@@ -132,12 +144,19 @@ class FusionPipeline {
  private:
   // Replaces merged_normals_ by the volume's where D''' agrees with D_v (NormalSource::kVolume).
   void VolumeNormals();
+  // Tracks the frame from pose_ (state_ kTracking or kUncertain) or relocalises it (kLost);
+  // fills r.icp, r.quality, r.relocalised and updates pose_, state_, the monitor.
+  void Track(double interval_s, FrameResult& r);
 
   FusionOptions options_;
   std::unique_ptr<ThreadPool> pool_;
   std::unique_ptr<TsdfVolume> volume_;
   TrackingState state_ = TrackingState::kEmpty;
   Pose pose_;
+  TrackingQualityMonitor monitor_;
+  int uncertain_run_ = 0;      // consecutive uncertain frames before this one
+  double since_good_s_ = 0;    // seconds since the last integrated frame (lost: extrapolation)
+  int64_t last_stamp_ns_ = 0;  // of the previous frame, 0 = none
   FramePyramid frame_;
   ModelPyramid model_;
   GeometryView view_;
