@@ -239,7 +239,31 @@ void ExpectDistinctSelfConsistentHashes() {
 TEST(LayoutHashTest, EveryMessageTypeHasADistinctSelfConsistentHash) {
   ExpectDistinctSelfConsistentHashes<Header, Vector3, Quaternion, RigidTransform, Image, CameraInfo,
                                      Pose, FaceObservation, ShLight, GeometryBuffer, TransferBuffer,
-                                     Ack, PlayerControl, AuxiliaryView, AuxiliaryViews>();
+                                     Ack, PlayerControl, AuxiliaryView, AuxiliaryViews,
+                                     TrackingStatus>();
+}
+
+TEST(TrackingStatusTest, ValidatesStateScoreAndFlags) {
+  TrackingStatus status;
+  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
+            "probeless_msgs/TrackingStatus: state 0 is not tracked (1), uncertain (2) or lost (3)");
+  status.state = TrackingStatusState::kUncertain;
+  status.score = 0.25f;
+  EXPECT_NO_THROW(status.Validate());
+  status.score = 1.5f;
+  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
+            "probeless_msgs/TrackingStatus: score 1.500000 is outside [0, 1]");
+  status.score = 0;
+  status.integrated = 2;
+  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
+            "probeless_msgs/TrackingStatus: integrated and relocalised must be 0 or 1");
+  status.integrated = 0;
+  status.SetReasonText(std::string(500, 'r'));  // cut, not refused
+  EXPECT_EQ(status.ReasonText().size(), kTrackingReasonCapacity - 1);
+  EXPECT_NO_THROW(status.Validate());
+  EXPECT_NE(TrackingStatus::LayoutDescription().find(
+                "state:TrackingStatusState{invalid=0,tracked=1,uncertain=2,lost=3}:u32@56;"),
+            std::string::npos);
 }
 
 TEST(ReplayMessagesTest, AckTopicFitsEveryBusTopicName) {

@@ -57,7 +57,7 @@ MessageBuffer MakeImage(m::Encoding encoding, uint32_t width, uint32_t height, u
 
 TEST(Ros2ConvertersTest, EveryTypeHasOneConverter) {
   const auto all = AllRos2Converters();
-  ASSERT_EQ(all.size(), 7u);
+  ASSERT_EQ(all.size(), 8u);
   std::set<std::string_view> probeless_types;
   std::set<std::string_view> ros2_types;
   for (const Ros2Converter* converter : all) {
@@ -66,12 +66,13 @@ TEST(Ros2ConvertersTest, EveryTypeHasOneConverter) {
     EXPECT_EQ(FindRos2ConverterByProbelessType(converter->probeless_type()), converter);
     EXPECT_EQ(FindRos2ConverterByRos2Type(converter->ros2_type()), converter);
   }
-  EXPECT_EQ(probeless_types.size(), 7u);
+  EXPECT_EQ(probeless_types.size(), 8u);
   EXPECT_EQ(ros2_types, (std::set<std::string_view>{
                             "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo",
                             "geometry_msgs/msg/PoseStamped", "probeless_msgs/msg/FaceObservation",
                             "probeless_msgs/msg/ShLight", "probeless_msgs/msg/GeometryBuffer",
-                            "probeless_msgs/msg/TransferBuffer"}));
+                            "probeless_msgs/msg/TransferBuffer",
+                            "probeless_msgs/msg/TrackingStatus"}));
   EXPECT_EQ(Ros2ConverterFor<m::Image>().ros2_type(), "sensor_msgs/msg/Image");
   EXPECT_EQ(Ros2ConverterFor<m::Pose>().layout_hash(), m::Pose::kLayoutHash);
   EXPECT_EQ(FindRos2ConverterByRos2Type("std_msgs/msg/String"), nullptr);
@@ -439,12 +440,30 @@ MessageBuffer MakeTransfer() {
   return buffer;
 }
 
+MessageBuffer MakeTracking() {
+  MessageBuffer buffer(sizeof(m::TrackingStatus));
+  auto t = m::WriteMessage<m::TrackingStatus>(buffer.bytes());
+  FillHeader(t->header, 77, "camera_depth");
+  t->state = m::TrackingStatusState::kUncertain;
+  t->score = 0.3f;
+  t->reasons = m::kTrackingReasonMotion | m::kTrackingReasonDegenerate;
+  t->relocalised = 1;
+  t->rms_m = RandomFloat();
+  t->observability = 0.004f;
+  t->frames = 12;
+  t->lost_frames = 3;
+  t->relocalisations = 1;
+  t->SetReasonText("step 7.0 cm off the constant-velocity prediction (soft 5.0 cm)");
+  return buffer;
+}
+
 TEST(ProbelessTypesConversionTest, RoundTripsAreByteExact) {
   const std::pair<std::string_view, MessageBuffer> messages[] = {
       {m::FaceObservation::kTypeName, MakeFace()},
       {m::ShLight::kTypeName, MakeLight()},
       {m::GeometryBuffer::kTypeName, MakeGeometry()},
-      {m::TransferBuffer::kTypeName, MakeTransfer()}};
+      {m::TransferBuffer::kTypeName, MakeTransfer()},
+      {m::TrackingStatus::kTypeName, MakeTracking()}};
   for (const auto& [type, original] : messages) {
     SCOPED_TRACE(std::string(type));
     const Ros2Converter& converter = Ros2ConverterForType(type);

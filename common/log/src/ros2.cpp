@@ -15,6 +15,7 @@
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/pose.h"
 #include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/tracking_status.h"
 #include "probeless/msgs/transfer_buffer.h"
 
 namespace probeless::log {
@@ -869,6 +870,101 @@ class TransferBufferConverter : public TypedConverter<m::TransferBuffer, Transfe
   }
 };
 
+// ---- probeless_msgs/msg/TrackingStatus ----
+
+struct TrackingFields {
+  m::TrackingStatus status;  // every field but the reason text
+  std::string reason_text;
+};
+
+class TrackingStatusConverter : public TypedConverter<m::TrackingStatus, TrackingFields> {
+ public:
+  TrackingStatusConverter()
+      : TypedConverter(
+            "probeless_msgs/msg/TrackingStatus",
+            ComposeSchema(
+                std::string("# The camera tracker's verdict on one frame "
+                            "(probeless_msgs/TrackingStatus, docs/messages.md).\n") +
+                    std::string(kFullHeaderFields) +
+                    "uint32 state                 # 1 tracked, 2 uncertain, 3 lost\n"
+                    "float32 score                # 0..1: from 0.5 tracked, 0 lost\n"
+                    "uint32 reasons               # bits: 1 icp, 2 residual, 4 inliers, 8 motion, "
+                    "16 degenerate, 32 persistent, 64 relocalising\n"
+                    "bool integrated\n"
+                    "bool relocalised\n"
+                    "float32 rms_m\n"
+                    "float32 inlier_fraction\n"
+                    "float32 residual_ratio\n"
+                    "float32 inlier_ratio\n"
+                    "float32 motion_translation_m\n"
+                    "float32 motion_rotation_deg\n"
+                    "float32 observability\n"
+                    "uint64 frames\n"
+                    "uint64 tracked_frames\n"
+                    "uint64 uncertain_frames\n"
+                    "uint64 lost_frames\n"
+                    "uint64 relocalisations\n"
+                    "string reason_text\n",
+                {kStdHeader, kTime})) {}
+
+ protected:
+  void Write(const m::TrackingStatus& t, std::span<const std::byte>,
+             CdrWriter& out) const override {
+    t.Validate();
+    WriteFullHeader(out, t.header, ros2_type_);
+    out.Write<uint32_t>(static_cast<uint32_t>(t.state));
+    out.Write<float>(t.score);
+    out.Write<uint32_t>(t.reasons);
+    out.Write<uint8_t>(t.integrated);
+    out.Write<uint8_t>(t.relocalised);
+    for (float v : {t.rms_m, t.inlier_fraction, t.residual_ratio, t.inlier_ratio,
+                    t.motion_translation_m, t.motion_rotation_deg, t.observability}) {
+      out.Write<float>(v);
+    }
+    for (uint64_t v : {t.frames, t.tracked_frames, t.uncertain_frames, t.lost_frames,
+                       t.relocalisations}) {
+      out.Write<uint64_t>(v);
+    }
+    out.String(t.ReasonText());
+  }
+
+  TrackingFields Parse(CdrReader& in) const override {
+    TrackingFields f;
+    m::TrackingStatus& t = f.status;
+    ReadFullHeader(in, t.header);
+    t.state = static_cast<m::TrackingStatusState>(in.Read<uint32_t>("state"));
+    t.score = in.Read<float>("score");
+    t.reasons = in.Read<uint32_t>("reasons");
+    t.integrated = in.Read<uint8_t>("integrated");
+    t.relocalised = in.Read<uint8_t>("relocalised");
+    for (float* v : {&t.rms_m, &t.inlier_fraction, &t.residual_ratio, &t.inlier_ratio,
+                     &t.motion_translation_m, &t.motion_rotation_deg, &t.observability}) {
+      *v = in.Read<float>("cue");
+    }
+    t.frames = in.Read<uint64_t>("frames");
+    t.tracked_frames = in.Read<uint64_t>("tracked_frames");
+    t.uncertain_frames = in.Read<uint64_t>("uncertain_frames");
+    t.lost_frames = in.Read<uint64_t>("lost_frames");
+    t.relocalisations = in.Read<uint64_t>("relocalisations");
+    f.reason_text = in.String("reason_text");
+    if (f.reason_text.size() >= m::kTrackingReasonCapacity) {
+      in.Fail("reason_text", std::to_string(f.reason_text.size()) + " characters, at most " +
+                                 std::to_string(m::kTrackingReasonCapacity - 1) + " fit");
+    }
+    return f;
+  }
+
+  void Fill(const TrackingFields& f, const std::map<std::string, std::string>&,
+            m::TrackingStatus& t, std::span<std::byte>) const override {
+    t = f.status;
+    t.SetReasonText(f.reason_text);
+  }
+
+  void Check(const m::TrackingStatus& t, std::span<const std::byte>) const override {
+    t.Validate();
+  }
+};
+
 const ImageConverter kImage;
 const CameraInfoConverter kCameraInfo;
 const PoseConverter kPoseConverter;
@@ -876,8 +972,10 @@ const FaceObservationConverter kFace;
 const ShLightConverter kShLight;
 const GeometryBufferConverter kGeometry;
 const TransferBufferConverter kTransfer;
-const Ros2Converter* const kConverters[] = {&kImage,   &kCameraInfo, &kPoseConverter, &kFace,
-                                            &kShLight, &kGeometry,   &kTransfer};
+const TrackingStatusConverter kTracking;
+const Ros2Converter* const kConverters[] = {&kImage,    &kCameraInfo, &kPoseConverter,
+                                            &kFace,     &kShLight,    &kGeometry,
+                                            &kTransfer, &kTracking};
 
 }  // namespace
 

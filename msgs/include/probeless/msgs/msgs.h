@@ -12,4 +12,5 @@
 #include "probeless/msgs/pose.h"
 #include "probeless/msgs/replay.h"
 #include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/tracking_status.h"
 #include "probeless/msgs/transfer_buffer.h"

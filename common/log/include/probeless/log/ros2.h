@@ -6,7 +6,7 @@
 //   probeless_msgs/Image          <-> sensor_msgs/msg/Image
 //   probeless_msgs/CameraInfo     <-> sensor_msgs/msg/CameraInfo
 //   probeless_msgs/Pose           <-> geometry_msgs/msg/PoseStamped
-//   probeless_msgs/FaceObservation, ShLight, GeometryBuffer, TransferBuffer
+//   probeless_msgs/FaceObservation, ShLight, GeometryBuffer, TransferBuffer, TrackingStatus
 //                                 <-> probeless_msgs/msg/<same name> (defined here)
 // A probeless Header maps to std_msgs/Header: stamp_ns becomes builtin_interfaces/Time (sec,
 // nanosec; the stamp must lie in the int32 seconds range 1901..2038), frame_id the string. The
