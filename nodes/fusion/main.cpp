@@ -1,10 +1,15 @@
 // fusion: real-time CPU KinectFusion and the image-space depth merge (Gruber et al. 2015 §4) as a
 // node. Subscribes camera/depth (depth16 or float32), camera/image (rgb8, bgr8 or mono8; used as
 // the merge's intensity guidance, assumed registered to the depth), camera/camera_info and
-// ~/reset (any probeless_msgs/Header: forget the map). Publishes scene/gbuffer (G_r: merged depth,
-// normals, colour; GeometryBuffer in the depth camera's frame) and scene/pose (camera -> world,
-// parent param world_frame) for every tracked frame; when tracking is lost the pose is not
-// published, the loss is logged and G_r carries the raw depth merged without the volume.
+// ~/reset (any probeless_msgs/Header: forget the map). Publishes, per frame and in this order,
+// scene/tracking (TrackingStatus: the tracking-quality verdict, recon/tracking_quality.h, with
+// running counts), scene/pose (camera -> world, parent param world_frame; tracked and uncertain
+// frames only, none for a lost frame) and scene/gbuffer (G_r: merged depth, normals, colour;
+// GeometryBuffer in the depth camera's frame; for uncertain and lost frames the raw depth merged
+// without the volume). A change of the tracking state is logged once (a warning when it leaves
+// "tracked", an info line when it comes back), not every frame. At shutdown one summary line
+// on stdout: "fusion: frames=N tracked=T uncertain=U lost=L relocalised=R", plus a warning
+// naming the lost share when L > 0.
 //
 // Params: volume_size (2.0 m), volume_resolution (256), volume_origin ([-1, -1.2, 0.5] m, in the
 // first camera's frame), truncation (0.03 m), max_weight (64), threads (2), depth_min (0.3),
@@ -21,11 +26,12 @@
 // side), aux_light (false: also the view from the light: subscribes scene/light, the ShLight
 // scene_light publishes in the camera frame of a G_r, turns its dominant direction into the world
 // with the pose of that G_r's stamp and adds the light view to every later frame's views). Reset:
-// publish any probeless_msgs/Header on ~/reset (/fusion/reset).
+// publish any probeless_msgs/Header on ~/reset (/fusion/reset). fail_on_lost_ratio (-1 = off):
+// exit 3 at shutdown when lost / frames exceeds it (0: any lost frame).
 //
 // A frame is processed when its depth and its image (same header.stamp_ns) have both arrived, or
 // on the depth alone when no image with that stamp comes before the next depth. Exit: 0 on
-// SIGINT/SIGTERM, 2 on bad params, 1 otherwise.
+// SIGINT/SIGTERM, 3 then when fail_on_lost_ratio is exceeded, 2 on bad params, 1 otherwise.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -114,6 +120,7 @@ int Run(int argc, char** argv) {
   const bool publish_aux = node.Param("publish_aux", false);
   const int aux_pixels = node.Param("aux_pixels", 128);
   const bool aux_light = node.Param("aux_light", false);
+  const double fail_on_lost_ratio = node.Param("fail_on_lost_ratio", -1.0);
   if (aux_pixels < 1 || aux_pixels > static_cast<int>(msgs::kMaxAuxiliaryViewPixels)) {
     throw node::NodeError("fusion: param aux_pixels must be in 1..4096, got " +
                           std::to_string(aux_pixels));
@@ -127,6 +134,7 @@ int Run(int argc, char** argv) {
   bus::Subscriber reset_sub = node.CreateSubscriber<msgs::Header>("~/reset");
   std::optional<bus::Publisher> gbuffer_pub;
   uint32_t gbuffer_w = 0, gbuffer_h = 0;
+  bus::Publisher tracking_pub = node.CreatePublisher<msgs::TrackingStatus>("scene/tracking");
   bus::Publisher pose_pub = node.CreatePublisher<msgs::Pose>("scene/pose");
   std::optional<bus::Publisher> aux_pub;
   std::optional<bus::Subscriber> light_sub;
@@ -145,7 +153,10 @@ int Run(int argc, char** argv) {
   std::optional<msgs::CameraInfo> info;
   std::optional<PendingDepth> pending_depth;
   std::optional<PendingImage> last_image;
-  uint64_t frames = 0, lost_frames = 0;
+  uint64_t frames = 0, tracked_frames = 0, uncertain_frames = 0, lost_frames = 0,
+           relocalisations = 0;
+  recon::TrackingState last_state = recon::TrackingState::kTracking;
+  uint64_t lost_since = 0;  // frame number of the first lost frame of the current loss
   std::vector<double> total_ms;
 
   auto process = [&](PendingDepth& d, const PendingImage* image) {
@@ -154,15 +165,59 @@ int Run(int argc, char** argv) {
         image->grey.height == d.depth.height) {
       grey = &image->grey;
     }
-    const recon::FrameResult r = pipeline.Process(d.depth, d.intrinsics, grey);
+    const recon::FrameResult r =
+        pipeline.Process(d.depth, d.intrinsics, grey, nullptr, d.header.stamp_ns);
     ++frames;
     total_ms.push_back(r.timings.total_ms);
-    if (r.state == recon::TrackingState::kLost) {
-      ++lost_frames;
-      node.Warn() << "tracking lost at frame " << frames << ": " << r.icp.failure
-                  << " (not integrating; relocalising against the last good pose)";
-    } else {
-      if (r.relocalised) node.Info() << "relocalised at frame " << frames;
+    tracked_frames += r.state == recon::TrackingState::kTracking;
+    uncertain_frames += r.state == recon::TrackingState::kUncertain;
+    lost_frames += r.state == recon::TrackingState::kLost;
+    relocalisations += r.relocalised;
+    // One line per change of state, not per frame.
+    if (r.state != last_state) {
+      if (r.state == recon::TrackingState::kLost) {
+        lost_since = frames;
+        node.Warn() << "tracking lost at frame " << frames << ": " << r.quality.text
+                    << " (not integrating; relocalising against the last good pose)";
+      } else if (r.state == recon::TrackingState::kUncertain) {
+        node.Warn() << "tracking uncertain at frame " << frames << ": " << r.quality.text
+                    << " (pose published, not integrating)";
+      } else if (r.relocalised) {
+        node.Info() << "tracking resumed at frame " << frames << ": relocalised after "
+                    << frames - lost_since << " lost frame(s)";
+      } else {
+        node.Info() << "tracking resumed at frame " << frames;
+      }
+      last_state = r.state;
+    }
+    {
+      bus::Loan loan = tracking_pub.Borrow(sizeof(msgs::TrackingStatus));
+      auto t = msgs::WriteMessage<msgs::TrackingStatus>(loan.data());
+      t->header = d.header;
+      t->state = r.state == recon::TrackingState::kLost ? msgs::TrackingStatusState::kLost
+                 : r.state == recon::TrackingState::kUncertain
+                     ? msgs::TrackingStatusState::kUncertain
+                     : msgs::TrackingStatusState::kTracked;
+      t->score = r.quality.score;
+      t->reasons = r.quality.reasons;
+      t->integrated = r.integrated ? 1 : 0;
+      t->relocalised = r.relocalised ? 1 : 0;
+      t->rms_m = r.icp.rms_m;
+      t->inlier_fraction = r.icp.inlier_fraction;
+      t->residual_ratio = r.quality.residual_ratio;
+      t->inlier_ratio = r.quality.inlier_ratio;
+      t->motion_translation_m = r.quality.motion_translation_m;
+      t->motion_rotation_deg = r.quality.motion_rotation_deg;
+      t->observability = r.quality.observability;
+      t->frames = frames;
+      t->tracked_frames = tracked_frames;
+      t->uncertain_frames = uncertain_frames;
+      t->lost_frames = lost_frames;
+      t->relocalisations = relocalisations;
+      t->SetReasonText(r.quality.text);
+      tracking_pub.Publish(std::move(loan));
+    }
+    if (r.state != recon::TrackingState::kLost) {
       bus::Loan loan = pose_pub.Borrow(sizeof(msgs::Pose));
       auto out = msgs::WriteMessage<msgs::Pose>(loan.data());
       out->header = d.header;
@@ -274,6 +329,7 @@ int Run(int argc, char** argv) {
          pending_depth.reset();
          recent_poses.clear();
          light_world.reset();
+         last_state = recon::TrackingState::kTracking;  // a new map starts tracked
          node.Info() << "reset: map cleared";
        }},
   };
@@ -297,16 +353,32 @@ int Run(int argc, char** argv) {
   node.Spin(handlers);
   if (pending_depth) process(*pending_depth, nullptr);
   std::sort(total_ms.begin(), total_ms.end());
-  node.Info() << "processed " << frames << " frames, " << lost_frames << " lost, median "
+  node.Info() << "processed " << frames << " frames, median "
               << (total_ms.empty() ? 0.0 : total_ms[total_ms.size() / 2]) << " ms";
   if (!mesh_out.empty()) {
     const recon::Mesh mesh = pipeline.volume().ExtractMesh(pipeline.pool());
     recon::WritePly(mesh, mesh_out);
     node.Info() << "wrote " << mesh.indices.size() / 3 << " triangles to " << mesh_out;
   }
-  std::printf("fusion: frames=%llu lost=%llu\n", static_cast<unsigned long long>(frames),
-              static_cast<unsigned long long>(lost_frames));
+  // The run's summary: one line a launch log or a test can read.
+  std::printf("fusion: frames=%llu tracked=%llu uncertain=%llu lost=%llu relocalised=%llu\n",
+              static_cast<unsigned long long>(frames),
+              static_cast<unsigned long long>(tracked_frames),
+              static_cast<unsigned long long>(uncertain_frames),
+              static_cast<unsigned long long>(lost_frames),
+              static_cast<unsigned long long>(relocalisations));
   std::fflush(stdout);
+  const double lost_ratio = frames > 0 ? static_cast<double>(lost_frames) / frames : 0.0;
+  if (lost_frames > 0) {
+    node.Warn() << "map unreliable: " << lost_frames << " of " << frames << " frames lost ("
+                << 100.0 * lost_ratio << " %), " << uncertain_frames << " uncertain, "
+                << relocalisations << " relocalisations";
+  }
+  if (fail_on_lost_ratio >= 0 && lost_ratio > fail_on_lost_ratio) {
+    node.Error() << "lost " << lost_frames << " of " << frames << " frames, more than "
+                 << "fail_on_lost_ratio " << fail_on_lost_ratio;
+    return 3;
+  }
   return 0;
 }
 

@@ -73,7 +73,9 @@ TEST(FusionLaunch, RecordedStreamInLockStepThroughTheFusionNode) {
   const std::string out = Slurp(log);
   ASSERT_TRUE(WIFEXITED(status)) << out;
   EXPECT_EQ(WEXITSTATUS(status), 0) << out;
-  EXPECT_NE(out.find("fusion: frames=40 lost=0"), std::string::npos) << out;
+  EXPECT_NE(out.find("fusion: frames=40 tracked=40 uncertain=0 lost=0 relocalised=0"),
+            std::string::npos)
+      << out;
   EXPECT_TRUE(fs::exists(mesh)) << out;
   EXPECT_GT(fs::file_size(mesh), 100000u);
   // The subscriber may join after the first messages; most frames must arrive.
