@@ -165,7 +165,9 @@ int Run(int argc, char** argv) {
   pt.samples_per_pixel = pt_spp;
   pt.max_bounces = 3;
   if (pathtrace) {
-    raytrace::BlackbodyRgb(6500);  // warm-up: the GGX albedo tables are built on first use
+    raytrace::Camera tiny = room_camera;  // warm-up: the GGX albedo tables are built on first use
+    tiny.width = tiny.height = 1;
+    raytrace::PathTrace(room, tiny, pt, &pool);
     Row r{"path trace 640x480, " + std::to_string(pt_spp) + " spp, 3 bounces (room)"};
     const double cpu0 = CpuSeconds();
     const auto t0 = Clock::now();
