@@ -222,6 +222,18 @@ TEST(Transfer, RegionEqualsTheFullTransferAtItsPixels) {
             }),
             "light::TransferComputer::ComputeRegion: rect [150, 161) x [0, 10) is empty or not "
             "inside 160x120");
+  // A mask skips samples and leaves the others bit-identical.
+  std::vector<uint8_t> mask(31 * 37, 1);
+  mask[5] = 0;
+  region.ComputeRegion(scene.View(), {}, nullptr, {70, 40, 101, 77}, 1, &b, mask);
+  EXPECT_EQ(b.valid[5], 0);
+  EXPECT_EQ(b.transfer[5 * 16], 0.0f);
+  EXPECT_EQ(b.transfer[6 * 16], a.transfer[(40 * 160 + 76) * 16]);
+  EXPECT_EQ(ErrorOf([&] {
+              region.ComputeRegion(scene.View(), {}, nullptr, {70, 40, 101, 77}, 1, &b,
+                                   std::span<const uint8_t>(mask).first(3));
+            }),
+            "light::TransferComputer::ComputeRegion: mask has 3 bytes, expected 31x37");
   EXPECT_EQ(ErrorOf([&] {
               region.ComputeRegion(scene.View(), {}, nullptr, {0, 0, 5, 5}, 0, &b);
             }),

@@ -113,7 +113,7 @@ int Run(int argc, char** argv) {
   diff_options.transfer.bands = node.Param("ssdo_bands", 4);
   diff_options.transfer.seed = static_cast<uint64_t>(node.Param<int64_t>("ssdo_seed", 1));
   diff_options.transfer.threads = node.Param("ssdo_threads", 2);
-  diff_options.step = node.Param("differential_step", 1);
+  diff_options.step = node.Param("differential_step", 2);
   diff_options.smooth_radius = node.Param("differential_smooth", 2);
   const std::string diff_tone = node.Param("differential_tone", "ratio");
   if (diff_tone != "fixed" && diff_tone != "key" && diff_tone != "ratio") {

@@ -9,6 +9,11 @@
 //    ShLight messages (CLOCK_MONOTONIC) at 30 Hz; the render loop takes each light, renders and
 //    publishes the composite (Image rgb8) with the light's stamp; a receiver thread takes the
 //    composites and records now - stamp. Transport is the probeless bus (shared memory).
+// 3. Differential rendering from G_r (scene mode's default, render/differential.h): a 0.15 m
+//    world-anchored sphere on the floor of a 640x480 G_r (floor 0.4 m below the camera, wall at
+//    2 m), per frame RasteriseObjects + DifferentialRenderer (SSDO of G_r and G_r' in the window,
+//    ratio tone, bounce light) + ApplyDifferential + Render with the real depth; full (step 1)
+//    and OursFast-style (step 2), and the light-to-composite latency of the full variant.
 // Prints the JSON object on stdout and writes it to OUT.
 #include <unistd.h>
 
@@ -28,6 +33,7 @@
 #include "probeless/msgs/msgs.h"
 #include "probeless/prt/demo_objects.h"
 #include "probeless/prt/prt.h"
+#include "probeless/render/differential.h"
 #include "probeless/render/renderer.h"
 #include "probeless/sh/sh.h"
 
@@ -128,6 +134,27 @@ int main(int argc, char** argv) {
     receiver.transfer_with_virtual = receiver.transfer_real;
     receiver.anchor = render::Anchor::kFace;
     const int receiver_index = renderer.AddReceiver(receiver);
+    // Scene mode: the world-anchored sphere (camera = world here) and its G_r.
+    render::VirtualObject ball;
+    ball.mesh = Sphere(triangles);
+    for (raytrace::Vec3& p : ball.mesh.mesh.positions) p = {p.x * 5, p.y * 5, p.z * 5};
+    ball.anchor = render::Anchor::kWorld;
+    ball.object_to_anchor = raytrace::Transform{raytrace::Mat3::Identity(), {0, 0.25, 1.8}};
+    ball.visible = false;
+    const int ball_index = renderer.AddObject(ball);
+    const light::Intrinsics gk{525, 525, 319.5, 239.5};
+    std::vector<float> g_depth(kW * kH), g_normals(3 * kW * kH);
+    for (int v = 0; v < kH; ++v) {
+      for (int u = 0; u < kW; ++u) {
+        const size_t p = static_cast<size_t>(v) * kW + u;
+        const double dy = (v - gk.cy) / gk.fy;
+        const bool floor = dy > 0 && 0.4 / dy < 2.0;
+        g_depth[p] = static_cast<float>(floor ? 0.4 / dy : 2.0);
+        g_normals[3 * p + 1] = floor ? -1.0f : 0.0f;
+        g_normals[3 * p + 2] = floor ? 0.0f : -1.0f;
+      }
+    }
+    const light::GeometryView g_real{kW, kH, gk, g_depth, g_normals, {}};
 
     std::vector<uint8_t> camera(kW * kH * 3);
     for (size_t i = 0; i < camera.size(); ++i) camera[i] = static_cast<uint8_t>((i * 31) % 251);
@@ -153,6 +180,58 @@ int main(int argc, char** argv) {
     };
     const std::vector<double> plain = run(false);
     const std::vector<double> diff = run(true);
+    // Scene mode: G_r' and eq. 13-15 on the CPU, then the GL passes with the real depth.
+    render::VirtualGeometry g_virtual;
+    render::DifferentialResult g_result;
+    std::vector<uint8_t> g_camera;
+    double g_transfer_ms = 0;
+    int g_changed = 0;
+    auto coherent_frame = [&](render::DifferentialRenderer& dr) {
+      render::RasterObject o{&ball.mesh.mesh, ball.object_to_anchor, {0.8f, 0.1f, 0.1f}, true};
+      render::RasteriseObjects(g_real, {&o, 1}, &g_virtual);
+      render::DifferentialFrame df;
+      df.real = g_real;
+      df.with_virtual = &g_virtual;
+      df.light = in.light;
+      df.dominant = {{0, -0.7f, -0.7f}, 2.0f};
+      df.camera_tone = renderer.tone_mapping();
+      df.camera_rgb = camera;
+      dr.Compute(df, &g_result);
+      g_camera = camera;
+      render::ApplyDifferential(g_result, kW, kH, g_camera);
+      render::FrameInputs gin = in;
+      gin.camera_rgb = g_camera;
+      gin.real_depth = g_depth;
+      renderer.Render(gin, out);
+      g_transfer_ms = g_result.ms_transfer;
+      g_changed = g_result.changed_pixels;
+    };
+    auto run_coherent = [&](int step, double* transfer_ms) {
+      render::DifferentialOptions o;
+      o.tone = render::DifferentialTone::kRatio;
+      o.step = step;
+      render::DifferentialRenderer dr(o);
+      renderer.SetReceiverVisible(receiver_index, false);
+      renderer.SetObjectVisible(0, false);
+      renderer.SetObjectVisible(ball_index, true);
+      std::vector<double> ms, transfer;
+      for (int f = 0; f < std::min(frames, 60) + 3; ++f) {
+        in.light = Light(f * 0.05);
+        const auto t0 = Clock::now();
+        coherent_frame(dr);
+        const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        if (f >= 3) ms.push_back(dt), transfer.push_back(g_transfer_ms);
+      }
+      renderer.SetObjectVisible(0, true);
+      renderer.SetObjectVisible(ball_index, false);
+      *transfer_ms = Percentile(transfer, 0.5);
+      return ms;
+    };
+    double coherent_transfer_ms = 0, coherent_fast_transfer_ms = 0;
+    const std::vector<double> coherent = run_coherent(1, &coherent_transfer_ms);
+    const int coherent_window = g_result.window.width() * g_result.window.height();
+    const int coherent_changed = g_changed;
+    const std::vector<double> coherent_fast = run_coherent(2, &coherent_fast_transfer_ms);
     size_t covered = 0;
     for (uint8_t c : out.coverage) covered += c;
 
@@ -169,8 +248,13 @@ int main(int argc, char** argv) {
     bus::Subscriber image_sub("/bench/composite", msgs::TopicTypeOf<msgs::Image>(),
                               {.queue_depth = 4});
     const int latency_frames = std::min(frames, 150);
-    auto measure_latency = [&](bool differential) {
+    render::DifferentialOptions latency_options;
+    latency_options.tone = render::DifferentialTone::kRatio;
+    render::DifferentialRenderer latency_dr(latency_options);
+    auto measure_latency = [&](bool differential, bool coherent) {
       renderer.SetReceiverVisible(receiver_index, differential);
+      renderer.SetObjectVisible(0, !coherent);
+      renderer.SetObjectVisible(ball_index, coherent);
       std::vector<double> latency;
       std::atomic<bool> done{false};
       std::thread receiver_thread([&] {
@@ -203,7 +287,11 @@ int main(int argc, char** argv) {
           for (int c = 0; c < 3; ++c) in.light.coefficients[k][c] = m->coefficients[k][c];
         const msgs::Header header = m->header;
         s.reset();
-        renderer.Render(in, out);
+        if (coherent) {
+          coherent_frame(latency_dr);
+        } else {
+          renderer.Render(in, out);
+        }
         bus::Loan loan = image_pub.Borrow(image_options.max_message_bytes);
         auto img = msgs::WriteMessage<msgs::Image>(loan.data());
         img->header = header;
@@ -217,10 +305,11 @@ int main(int argc, char** argv) {
       receiver_thread.join();
       return latency;
     };
-    const std::vector<double> latency = measure_latency(false);
-    const std::vector<double> latency_diff = measure_latency(true);
+    const std::vector<double> latency = measure_latency(false, false);
+    const std::vector<double> latency_diff = measure_latency(true, false);
+    const std::vector<double> latency_coherent = measure_latency(false, true);
 
-    char buffer[4096];
+    char buffer[8192];
     std::snprintf(
         buffer, sizeof(buffer),
         "{\"backend\": \"%s\", \"gl_version\": \"%s\", \"gl_renderer\": \"%s\", \"width\": %d, "
@@ -230,14 +319,22 @@ int main(int argc, char** argv) {
         "\"frame_ms_differential_p95\": %.3f, \"latency_samples\": %zu, \"latency_ms_p50\": %.3f, "
         "\"latency_ms_p95\": %.3f, \"latency_ms_max\": %.3f, \"latency_differential_ms_p50\": "
         "%.3f, "
-        "\"latency_differential_ms_p95\": %.3f, \"lp_num_threads\": \"%s\"}",
+        "\"latency_differential_ms_p95\": %.3f, \"gbuffer_window_pixels\": %d, "
+        "\"gbuffer_changed_pixels\": %d, \"frame_ms_gbuffer_p50\": %.3f, "
+        "\"frame_ms_gbuffer_p95\": %.3f, \"transfer_ms_gbuffer_p50\": %.3f, "
+        "\"frame_ms_gbuffer_step2_p50\": %.3f, \"transfer_ms_gbuffer_step2_p50\": %.3f, "
+        "\"latency_gbuffer_ms_p50\": %.3f, \"latency_gbuffer_ms_p95\": %.3f, "
+        "\"lp_num_threads\": \"%s\"}",
         backend.c_str(), renderer.gl_version().c_str(), renderer.gl_renderer().c_str(), kW, kH,
         triangle_count, receiver.mesh.triangles.size(), covered, frames, 1000.0 / Mean(plain),
         Mean(plain), Percentile(plain, 0.5), Percentile(plain, 0.95), 1000.0 / Mean(diff),
         Percentile(diff, 0.5), Percentile(diff, 0.95), latency.size(), Percentile(latency, 0.5),
         Percentile(latency, 0.95),
         latency.empty() ? 0.0 : *std::max_element(latency.begin(), latency.end()),
-        Percentile(latency_diff, 0.5), Percentile(latency_diff, 0.95),
+        Percentile(latency_diff, 0.5), Percentile(latency_diff, 0.95), coherent_window,
+        coherent_changed, Percentile(coherent, 0.5), Percentile(coherent, 0.95),
+        coherent_transfer_ms, Percentile(coherent_fast, 0.5), coherent_fast_transfer_ms,
+        Percentile(latency_coherent, 0.5), Percentile(latency_coherent, 0.95),
         std::getenv("LP_NUM_THREADS") ? std::getenv("LP_NUM_THREADS") : "default");
     std::printf("%s\n", buffer);
     if (!json_path.empty()) {

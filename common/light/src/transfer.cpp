@@ -165,7 +165,7 @@ TransferComputer::~TransferComputer() = default;
 void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux,
                                    const DominantLight* light, int step, int x0_pixel, int y0_pixel,
                                    int out_width, int row_begin, int row_end, float* transfer,
-                                   uint8_t* valid, float* indirect) const {
+                                   uint8_t* valid, float* indirect, const uint8_t* mask) const {
   const int w = g.width, h = g.height;
   const int n_dir = directions_.count();
   const int cc = directions_.coefficient_count();
@@ -215,7 +215,7 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
       const float d = depth[p];
       const float nx = normals[3 * p], ny = normals[3 * p + 1], nz = normals[3 * p + 2];
       float ind[3] = {0, 0, 0};
-      if (!(d > 0) || (nx == 0 && ny == 0 && nz == 0)) {
+      if (!(d > 0) || (nx == 0 && ny == 0 && nz == 0) || (mask != nullptr && mask[o] == 0)) {
         std::fill(t_out, t_out + cc, 0.0f);
         valid[o] = 0;
         if (do_indirect) std::fill(indirect + 3 * o, indirect + 3 * o + 3, 0.0f);
@@ -496,7 +496,7 @@ void TransferComputer::Compute(const GeometryView& g, const AuxiliaryBuffers& au
 
 void TransferComputer::ComputeRegion(const GeometryView& g, const AuxiliaryBuffers& aux,
                                      const DominantLight* light, const PixelRect& rect, int step,
-                                     TransferResult* out) {
+                                     TransferResult* out, std::span<const uint8_t> mask) {
   ValidateGeometryView(g, "TransferComputer::ComputeRegion");
   for (size_t i = 0; i < aux.views.size(); ++i) ValidateAux(aux.views[i], i);
   if (step < 1) {
@@ -518,6 +518,11 @@ void TransferComputer::ComputeRegion(const GeometryView& g, const AuxiliaryBuffe
   const int cc = directions_.coefficient_count();
   const int ow = (rect.width() + step - 1) / step, oh = (rect.height() + step - 1) / step;
   const size_t samples = static_cast<size_t>(ow) * oh;
+  if (!mask.empty() && mask.size() != samples) {
+    throw LightError("light::TransferComputer::ComputeRegion: mask has " +
+                     std::to_string(mask.size()) + " bytes, expected " + std::to_string(ow) + "x" +
+                     std::to_string(oh));
+  }
   out->width = ow;
   out->height = oh;
   out->coefficient_count = cc;
@@ -534,7 +539,8 @@ void TransferComputer::ComputeRegion(const GeometryView& g, const AuxiliaryBuffe
   out->sample_valid.clear();
   internal::ParallelRows(options_.threads, oh, 4, [&](int begin, int end) {
     ComputeRows(g, aux, light, step, rect.x0, rect.y0, ow, begin, end, out->transfer.data(),
-                out->valid.data(), light ? out->indirect.data() : nullptr);
+                out->valid.data(), light ? out->indirect.data() : nullptr,
+                mask.empty() ? nullptr : mask.data());
   });
 }
 

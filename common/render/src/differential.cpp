@@ -160,11 +160,14 @@ light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intri
                                     const light::TransferOptions& options) {
   if (g.footprint.empty()) return {};
   const double r = options.radius_m;
-  // The nearest real point that a virtual occluder can reach (SSDO range check), kept beyond the
-  // sample radius so that the bound stays finite.
-  const double zx =
-      std::max<double>(g.min_virtual_depth - options.max_occluder_distance_m, 1.2 * r);
-  const double reach = std::max(k.fx, k.fy) * r / std::sqrt(zx * zx - r * r);
+  // A virtual surface s occludes a sample y = x + omega r' (r' <= r) only when it is in front of
+  // y, so x lies deeper than the nearest virtual depth minus r (kept beyond r: a finite bound).
+  const double zx = std::max<double>(g.min_virtual_depth - r, 1.2 * r);
+  // |y - x| <= r seen from depth zx, magnified towards the image corners (1 + tan^2).
+  const double tx = std::max(k.cx, g.width - 1 - k.cx) / k.fx;
+  const double ty = std::max(k.cy, g.height - 1 - k.cy) / k.fy;
+  const double reach =
+      std::max(k.fx, k.fy) * r / std::sqrt(zx * zx - r * r) * (1 + tx * tx + ty * ty);
   const int d = static_cast<int>(std::ceil(std::min(reach, 1e5))) + 1;
   return {std::max(0, g.footprint.x0 - d), std::max(0, g.footprint.y0 - d),
           std::min(g.width, g.footprint.x1 + d), std::min(g.height, g.footprint.y1 + d)};
@@ -218,8 +221,35 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
   const light::DominantLight* dominant = indirect ? &f.dominant : nullptr;
   const int step = options_.step;
   const auto t_transfer = Clock::now();
-  computer_->ComputeRegion(real, {}, dominant, win, step, &real_);
-  computer_->ComputeRegion(with, {}, dominant, win, step, &with_);
+  // Per sample, whether a virtual pixel is within its own reach (the window's bound at the
+  // sample's depth and direction): only those can differ, the others are skipped in both buffers.
+  const int mw = (win.width() + step - 1) / step, mh = (win.height() + step - 1) / step;
+  mask_.assign(static_cast<size_t>(mw) * mh, 0);
+  {
+    const light::Intrinsics& k = f.real.intrinsics;
+    const double r = options_.transfer.radius_m;
+    const light::PixelRect& fp = gv->footprint;
+    const double z_near = gv->min_virtual_depth - r;
+    for (int j = 0; j < mh; ++j) {
+      for (int i = 0; i < mw; ++i) {
+        const int u = std::min(win.x0 + i * step + step / 2, w - 1);
+        const int v = std::min(win.y0 + j * step + step / 2, h - 1);
+        const size_t p = static_cast<size_t>(v) * w + u;
+        const float z = f.real.depth[p];
+        if (!(z > 0) || gv->object_id[p] != 0 || z <= z_near) continue;
+        const double tu = (u - k.cx) / k.fx, tv = (v - k.cy) / k.fy;
+        const double zz = std::max<double>(z, 1.2 * r);
+        const double reach =
+            std::max(k.fx, k.fy) * r / std::sqrt(zz * zz - r * r) * (1 + tu * tu + tv * tv) * 1.1 +
+            step + 1;
+        const double du = std::max({0, fp.x0 - u, u - (fp.x1 - 1)});
+        const double dv = std::max({0, fp.y0 - v, v - (fp.y1 - 1)});
+        mask_[static_cast<size_t>(j) * mw + i] = du * du + dv * dv <= reach * reach;
+      }
+    }
+  }
+  computer_->ComputeRegion(real, {}, dominant, win, step, &real_, mask_);
+  computer_->ComputeRegion(with, {}, dominant, win, step, &with_, mask_);
   float avg_real = 0, avg_with = 0;
   if (options_.tone == DifferentialTone::kAverageKey) {
     // The per-buffer key of Gruber §5.4 (Reinhard 2002 eq. 1) over the whole image, sparsely.
@@ -303,7 +333,8 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
         const int v = std::min(win.y0 + j * step + step / 2, h - 1);
         const size_t p = static_cast<size_t>(v) * w + u;
         const size_t s = static_cast<size_t>(j) * sw + i;
-        if (gv->object_id[p] == 0 && real_.valid[s]) depth[s] = f.real.depth[p];
+        // Skipped samples (mask 0) are unchanged and take no part.
+        if (gv->object_id[p] == 0 && real_.valid[s] && mask_[s]) depth[s] = f.real.depth[p];
       }
     }
     std::vector<float> tmp(sample.size());

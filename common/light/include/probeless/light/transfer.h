@@ -172,17 +172,21 @@ class TransferComputer {
   // valid, indirect; no sparse samples), every value bit-identical to what Compute with subsample
   // 1 gives at that pixel (the 2x2 offsets are keyed by the full-resolution pixel), whatever the
   // options' subsample. The differential renderer's window (Gruber §5.4: R'_d differs from R_d
-  // only near the virtual objects) and sparse averages. Throws LightError as Compute, and for a
-  // rect not inside the view or empty, or step < 1.
+  // only near the virtual objects) and sparse averages. A non-empty `mask` (one byte per output
+  // sample) skips the samples where it is 0: they get valid 0, T and R_i 0. Throws LightError as
+  // Compute, and for a rect not inside the view or empty, step < 1 or a mask of another size.
   void ComputeRegion(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
-                     const PixelRect& rect, int step, TransferResult* out);
+                     const PixelRect& rect, int step, TransferResult* out,
+                     std::span<const uint8_t> mask = {});
 
  private:
   // Output rows [row_begin, row_end) of out_width samples: sample (c, r) is pixel
-  // (min(x0 + c step + step / 2, w - 1), min(y0 + r step + step / 2, h - 1)).
+  // (min(x0 + c step + step / 2, w - 1), min(y0 + r step + step / 2, h - 1)); samples whose
+  // `mask` byte is 0 are skipped (mask null: none).
   void ComputeRows(const GeometryView& g, const AuxiliaryBuffers& aux, const DominantLight* light,
                    int step, int x0, int y0, int out_width, int row_begin, int row_end,
-                   float* transfer, uint8_t* valid, float* indirect) const;
+                   float* transfer, uint8_t* valid, float* indirect,
+                   const uint8_t* mask = nullptr) const;
   // out[k] += (A_l / pi) Y_k(n) for unit n (the unoccluded transfer; analytic_unoccluded).
   void AddClampedCosine(float x, float y, float z, float* out) const;
   TransferOptions options_;

@@ -134,10 +134,11 @@ struct DifferentialResult {
 };
 
 // The SSDO reach in pixels around the footprint: a real point x is changed only if one of its
-// sample points x + omega r (r <= radius) projects onto a virtual pixel; at depth z that is at
-// most f radius / (z - radius) pixels away, and x lies no nearer than the virtual surface minus
-// max_occluder_distance_m. Returns the footprint dilated by that bound (clamped to the image,
-// empty for an empty footprint).
+// sample points y = x + omega r' (r' <= radius) projects onto a virtual pixel in front of y; at
+// depth z that is at most f radius / sqrt(z^2 - radius^2) pixels away (times 1 + tan^2 of the
+// ray's angle towards the image corners), and x lies deeper than the nearest virtual depth minus
+// radius. Returns the footprint dilated by that bound (clamped to the image, empty for an empty
+// footprint); DifferentialRenderer also skips the window's pixels beyond their own bound.
 light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intrinsics& k,
                                     const light::TransferOptions& options);
 
@@ -163,6 +164,7 @@ class DifferentialRenderer {
   std::unique_ptr<light::TransferComputer> computer_;
   light::TransferResult real_, with_;
   std::vector<uint8_t> real_colour_;
+  std::vector<uint8_t> mask_;  // the window's samples within reach of a virtual pixel
 };
 
 // Applies `result` to the camera image in place (width x height x 3 sRGB bytes): c = sRGB(lin(c) *
