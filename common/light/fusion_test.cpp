@@ -156,6 +156,36 @@ TEST(FuseLightsTest, DisagreeingInputsAgainstGroundTruth) {
   EXPECT_GT(both->confidence, agree[0].light.confidence);
 }
 
+TEST(FuseLightsTest, ConfidenceCalibrationMapsRawConfidences) {
+  const ConfidenceCalibration identity;
+  EXPECT_TRUE(identity.identity());
+  EXPECT_EQ(identity.Apply(0.3), 0.3);
+  const std::vector<double> knots{0.0, 90.0, 0.5, 20.0, 1.0, 5.0};
+  const ConfidenceCalibration table(knots);
+  EXPECT_NEAR(table.Apply(0.5), ConfidenceFromExpectedError(20), 1e-12);
+  EXPECT_NEAR(table.Apply(0.75), ConfidenceFromExpectedError(12.5), 1e-12);
+  EXPECT_NEAR(table.Apply(0.0), ConfidenceFromExpectedError(90), 1e-12);
+  EXPECT_NEAR(table.Apply(1.0), ConfidenceFromExpectedError(5), 1e-12);
+  const std::vector<double> odd{0.0, 90.0, 0.5};
+  try {
+    ConfidenceCalibration bad(odd);
+    FAIL() << "no exception";
+  } catch (const FusionError& e) {
+    EXPECT_STREQ(e.what(),
+                 "confidence calibration: 3 values, expected pairs (raw confidence, expected "
+                 "error in degrees)");
+  }
+  const std::vector<double> descending{0.5, 20.0, 0.2, 30.0};
+  try {
+    ConfidenceCalibration bad(descending);
+    FAIL() << "no exception";
+  } catch (const FusionError& e) {
+    EXPECT_STREQ(e.what(),
+                 "confidence calibration: knot 1 needs a raw confidence in [0, 1] above the "
+                 "previous one and an error > 0");
+  }
+}
+
 TEST(FuseLightsTest, DifferentUnitsAreRefused) {
   std::vector<FusionInput> in = {Light(100, 0.5f, 1.0f, 1, 0, 0), Light(100, 0.5f, 1.0f, 1, 0, 0)};
   in[0].name = "face/light";

@@ -6,7 +6,9 @@
 // ignored), min_confidence (0.05), consistency_sigma (3: the less confident of two inputs further
 // apart than that many combined expected errors is left out; 0 = off), face_units / scene_units
 // (linear | relative: what the producer publishes; a relative input is refused with one warning,
-// never averaged). Exit: 0 on SIGINT/SIGTERM, 2 on bad params, 1 otherwise.
+// never averaged), face_calibration / scene_calibration ([] = on the scale; else pairs raw
+// confidence, expected error in degrees: light::ConfidenceCalibration). Exit: 0 on SIGINT/SIGTERM,
+// 2 on bad params, 1 otherwise.
 #include "probeless/node/main.h"
 
 #include <optional>
@@ -40,6 +42,10 @@ int Run(int argc, char** argv) {
   const light::LightUnits units[2] = {
       Units("face_units", node.Param("face_units", std::string("linear"))),
       Units("scene_units", node.Param("scene_units", std::string("linear")))};
+  // Raw confidences onto the ShLight scale, per input (empty = already on it).
+  const light::ConfidenceCalibration calibration[2] = {
+      light::ConfidenceCalibration(node.Param("face_calibration", std::vector<double>{})),
+      light::ConfidenceCalibration(node.Param("scene_calibration", std::vector<double>{}))};
   bus::Subscriber face = node.CreateSubscriber<msgs::ShLight>("face/light", {.queue_depth = 4});
   bus::Subscriber scene = node.CreateSubscriber<msgs::ShLight>("scene/light", {.queue_depth = 4});
   bus::Publisher out = node.CreatePublisher<msgs::ShLight>("light");
@@ -62,7 +68,9 @@ int Run(int argc, char** argv) {
           }
           continue;
         }
-        inputs.push_back({*latest[k], units[k], names[k]});
+        light::FusionInput input{*latest[k], units[k], names[k]};
+        input.light.confidence = static_cast<float>(calibration[k].Apply(input.light.confidence));
+        inputs.push_back(input);
       }
       try {
         if (const auto fused = light::FuseLights(inputs, options)) {

@@ -121,6 +121,13 @@ TEST(LightFusionNodeTest, BadParamsExitTwoWithOneLine) {
   EXPECT_EQ(u.code, 2);
   EXPECT_EQ(u.err,
             "[error] [light_fusion] param face_units must be linear or relative, got 'gamma'\n");
+  const auto c = probeless::testing::RunCommand(
+      std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p 'scene_calibration:=[0.5]'",
+      dir.path());
+  EXPECT_EQ(c.code, 2);
+  EXPECT_EQ(c.err,
+            "[error] [light_fusion] confidence calibration: 1 values, expected pairs (raw "
+            "confidence, expected error in degrees)\n");
 }
 
 }  // namespace

@@ -38,6 +38,36 @@ double ExpectedErrorFromConfidence(double confidence) {
   return kConfidenceReferenceErrorDeg * std::sqrt((1 - c) / c);
 }
 
+ConfidenceCalibration::ConfidenceCalibration(std::span<const double> knots) {
+  if (knots.size() % 2 != 0) {
+    throw FusionError("confidence calibration: " + std::to_string(knots.size()) +
+                      " values, expected pairs (raw confidence, expected error in degrees)");
+  }
+  for (size_t k = 0; k < knots.size(); k += 2) {
+    const double raw = knots[k], error = knots[k + 1];
+    if (!(raw >= 0 && raw <= 1) || (!raw_.empty() && !(raw > raw_.back())) || !(error > 0)) {
+      throw FusionError(
+          "confidence calibration: knot " + std::to_string(k / 2) +
+          " needs a raw confidence in [0, 1] above the previous one and an error > 0");
+    }
+    raw_.push_back(raw);
+    error_deg_.push_back(error);
+  }
+}
+
+double ConfidenceCalibration::Apply(double raw_confidence) const {
+  if (raw_.empty()) return raw_confidence;
+  if (!(raw_confidence > raw_.front())) return ConfidenceFromExpectedError(error_deg_.front());
+  for (size_t k = 1; k < raw_.size(); ++k) {
+    if (raw_confidence <= raw_[k]) {
+      const double t = (raw_confidence - raw_[k - 1]) / (raw_[k] - raw_[k - 1]);
+      return ConfidenceFromExpectedError(error_deg_[k - 1] +
+                                         t * (error_deg_[k] - error_deg_[k - 1]));
+    }
+  }
+  return ConfidenceFromExpectedError(error_deg_.back());
+}
+
 std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
                                         const FusionOptions& options) {
   if (inputs.empty()) return std::nullopt;

@@ -9,6 +9,7 @@
 #include <span>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "probeless/msgs/sh_light.h"
 
@@ -28,6 +29,24 @@ inline constexpr double kConfidenceReferenceErrorDeg = 10;
 double ConfidenceFromExpectedError(double error_deg);
 // c in [0, 1] -> e in degrees (c = 0 -> +inf).
 double ExpectedErrorFromConfidence(double confidence);
+
+// A producer's raw confidence mapped onto the scale above: knots (raw confidence, expected error
+// in degrees), raw ascending in [0, 1], errors > 0; piecewise linear between knots, constant
+// beyond the ends. For producers not yet calibrated (scene_light's R^2 x row saturation: to be
+// fitted on the evaluation world's validation split, docs/light.md "Fusion").
+class ConfidenceCalibration {
+ public:
+  // Empty knots = identity (the producer already publishes on the scale). Throws FusionError
+  // unless the list has an even number of values (pairs), raw values are strictly ascending in
+  // [0, 1] and errors are > 0.
+  explicit ConfidenceCalibration(std::span<const double> knots = {});
+  bool identity() const { return raw_.empty(); }
+  // Raw confidence -> confidence on the ShLight scale.
+  double Apply(double raw_confidence) const;
+
+ private:
+  std::vector<double> raw_, error_deg_;
+};
 
 // Units of a light's coefficients. kLinear: msgs::ShLight's contract (linear RGB radiance, 1 =
 // full scale of the image); kRelative: a face model's albedo-normalised, compressed units (only
