@@ -332,6 +332,12 @@ TEST(TrackingQuality, SplicedFramesAreLostNotIntegratedAndRelocalised) {
     const int bricks = pipeline.volume().ObservedBricks();
     const FrameResult r = pipeline.Process(Noisy(scene.Render(seen, k), rng), k, nullptr, nullptr,
                                            1'000'000'000LL + i * 33'333'333LL);
+    if (std::getenv("TQ_DEBUG")) {
+      std::fprintf(stderr, "frame %d %s err %.4f icp %s %.4f off %s\n", i,
+                   std::string(TrackingStateName(r.state)).c_str(),
+                   Distance(r.camera_to_world, truth), r.icp.ok ? "ok" : r.icp.failure.c_str(),
+                   Distance(r.icp.camera_to_world, truth), r.quality.text.c_str());
+    }
     if (spliced) {
       EXPECT_NE(r.state, TrackingState::kTracking) << "frame " << i;
       EXPECT_FALSE(r.integrated) << "frame " << i;

@@ -225,6 +225,7 @@ TrackingQuality TrackingQualityMonitor::Assess(const IcpResult& icp, const Pose&
   // A relocalisation is accepted only as fully tracked (an uncertain relocalisation stays lost).
   if (relocalising && score < 0.5f) {
     q.reasons |= kReasonRelocalising;
+    Append(q.text, "relocalisation not accepted");
     score = 0;
   }
   q.score = std::clamp(score, 0.0f, 1.0f);
