@@ -136,6 +136,57 @@ TEST(RenderNodeTest, BadParamsAndMissingMeshFail) {
       << out;
 }
 
+TEST(RenderNodeTest, DifferentialParamsAreChecked) {
+  std::string out;
+  EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p shadow_source:=plane", &out), 2);
+  EXPECT_NE(out.find("param shadow_source: expected gbuffer or mesh, got 'plane'"),
+            std::string::npos)
+      << out;
+  out.clear();
+  EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p differential_tone:=gamma", &out), 2);
+  EXPECT_NE(out.find("param differential_tone: expected fixed, key or ratio, got 'gamma'"),
+            std::string::npos)
+      << out;
+  out.clear();
+  EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p 'object_pixel:=[10.0, 20.0]'", &out), 2);
+  EXPECT_NE(out.find("param object_pixel: expected [u, v] (pixels) in scene mode, got 2 values in "
+                     "face mode"),
+            std::string::npos)
+      << out;
+}
+
+// The scene demo (launch/demo_scene.yaml, as tools/demo runs it) shadows the reconstruction: the
+// renderer does differential rendering from fusion's G_r on its frames, and no proxy mesh is
+// written or passed anywhere (tools/demo used to write the table top from the scenario's truth).
+TEST(RenderNodeTest, SceneDemoUsesTheReconstructionAndLeavesNoProxyMesh) {
+  namespace fs = std::filesystem;
+  const fs::path out_dir =
+      fs::temp_directory_path() / ("render_demo_scene_" + std::to_string(getpid()));
+  fs::create_directories(out_dir);
+  const std::string source = PROBELESS_SOURCE_DIR;
+  std::string out;
+  const int code = RunCommand("PROBELESS_DOMAIN=rdemo" + std::to_string(getpid()) + " " +
+                                  Bin("probeless") + " launch " + source +
+                                  "/launch/demo_scene.yaml out:=" + out_dir.string() + " frames:=3",
+                              &out);
+  EXPECT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("differential rendering from G_r on 3 frames"), std::string::npos) << out;
+  size_t meshes = 0;
+  for (const auto& e : fs::recursive_directory_iterator(out_dir)) {
+    const std::string ext = e.path().extension().string();
+    meshes += ext == ".obj" || ext == ".ply";
+  }
+  EXPECT_EQ(meshes, 0u) << "a mesh file in " << out_dir;
+  EXPECT_TRUE(fs::exists(out_dir / "scene_composite.avi"));
+  fs::remove_all(out_dir);
+  for (const std::string file : {"/tools/demo", "/launch/demo_scene.yaml"}) {
+    std::string text;
+    ASSERT_EQ(RunCommand("cat " + source + file, &text), 0);
+    EXPECT_EQ(text.find("scene_mesh"), std::string::npos) << file;
+    EXPECT_EQ(text.find("write_table_proxy"), std::string::npos) << file;
+  }
+}
+
 TEST(PrtBakeToolTest, BakesDemoObjectAndReportsErrors) {
   const std::string path =
       (std::filesystem::temp_directory_path() / "render_node_test_nose.prt").string();
