@@ -219,18 +219,25 @@ float IntersectArea(const Light& l, Vec3 o, Vec3 d, float t_min, float t_max, bo
   return t;
 }
 
-LightHit NearestAreaLight(const std::vector<Light>& lights, Vec3 o, Vec3 d, float t_max) {
+// The nearest of the area lights `area` (indices into `lights`) along (o, d) before t_max.
+LightHit NearestAreaLight(const std::vector<Light>& lights, const std::vector<int>& area, Vec3 o,
+                          Vec3 d, float t_max) {
   LightHit best;
   best.t = t_max;
-  for (size_t i = 0; i < lights.size(); ++i) {
-    if (!IsArea(lights[i])) continue;
+  for (const int i : area) {
     bool front = false;
     const float t = IntersectArea(lights[i], o, d, 0, best.t, &front);
-    if (t < best.t) {
-      best = {static_cast<int>(i), t, front};
-    }
+    if (t < best.t) best = {i, t, front};
   }
   return best;
+}
+
+std::vector<int> AreaIndices(const std::vector<Light>& lights) {
+  std::vector<int> area;
+  for (size_t i = 0; i < lights.size(); ++i) {
+    if (IsArea(lights[i])) area.push_back(static_cast<int>(i));
+  }
+  return area;
 }
 
 // The unshadowed-contribution estimate used to choose one light per vertex: > 0 wherever the light
@@ -346,7 +353,7 @@ struct TracerBuffers {
   std::vector<Ray> next_rays;
   std::vector<RTCRayHit> stream;
   std::vector<ShadowSample> shadows;
-  std::vector<RTCRay> shadow_stream, shadow_rays;
+  std::vector<RTCRay> shadow_stream;
   // The callers' per-task inputs and outputs.
   std::vector<Ray> start;
   std::vector<Rng> rngs;
@@ -366,6 +373,7 @@ class Tracer {
         handle_(internal::SceneAccess::Handle(scene)),
         options_(options),
         lights_(lights),
+        area_(AreaIndices(lights)),
         importance_(lights.size()),
         has_emission_(internal::SceneAccess::HasEmission(scene)),
         b_(ThreadBuffers()),
@@ -375,8 +383,7 @@ class Tracer {
         next_rays_(b_.next_rays),
         stream_(b_.stream),
         shadows_(b_.shadows),
-        shadow_stream_(b_.shadow_stream),
-        shadow_rays_(b_.shadow_rays) {}
+        shadow_stream_(b_.shadow_stream) {}
 
   // Traces the paths starting with `start` (unit directions), each with its own random stream;
   // radiance per path into `out` (same order). Returns the number of rays traced.
@@ -402,15 +409,11 @@ class Tracer {
       next_rays_.clear();
       for (size_t k = 0; k < active_.size(); ++k) Shade(active_[k], stream_[k]);
       if (!shadows_.empty()) {
-        // Keep the rays for the area-light test: Embree overwrites tfar of occluded rays.
-        shadow_rays_ = shadow_stream_;
         internal::OccludedStream(handle_, shadow_stream_.data(), shadow_stream_.size());
         traced += shadows_.size();
         for (size_t i = 0; i < shadows_.size(); ++i) {
           const bool occluded = std::isinf(shadow_stream_[i].tfar) && shadow_stream_[i].tfar < 0;
-          if (!occluded && !BlockedByAreaLight(shadows_[i], shadow_rays_[i])) {
-            paths_[shadows_[i].path].radiance += shadows_[i].contribution;
-          }
+          if (!occluded) paths_[shadows_[i].path].radiance += shadows_[i].contribution;
         }
       }
       std::swap(active_, next_active_);
@@ -421,19 +424,19 @@ class Tracer {
   }
 
  private:
-  bool BlockedByAreaLight(const ShadowSample& s, const RTCRay& r) const {
+  bool BlockedByAreaLight(const ShadowSample& s, const Ray& r) const {
     if (s.light == -2) return false;
-    const Vec3 o{r.org_x, r.org_y, r.org_z};
-    const Vec3 d{r.dir_x, r.dir_y, r.dir_z};
-    for (size_t i = 0; i < lights_.size(); ++i) {
-      if (static_cast<int>(i) == s.light || !IsArea(lights_[i])) continue;
+    for (const int i : area_) {
+      if (i == s.light) continue;
       bool front = false;
-      if (IntersectArea(lights_[i], o, d, 0, r.tfar, &front) < kInf) return true;
+      if (IntersectArea(lights_[i], r.origin, r.direction, 0, r.t_far, &front) < kInf) return true;
     }
     return false;
   }
 
+  // Queues a shadow ray, unless an area light (analytic, not in the BVH) already blocks it.
   void PushShadow(const Ray& ray, const ShadowSample& s) {
+    if (BlockedByAreaLight(s, ray)) return;
     shadows_.push_back(s);
     shadow_stream_.emplace_back();
     FillRay(ray, shadow_stream_.back());
@@ -452,7 +455,7 @@ class Tracer {
   // t_geom or, when it escapes (t_geom = inf), from the environment and the sun discs, with the
   // BSDF-side MIS weights. *absorbed: the ray ended on an area light (front or back).
   Vec3 Emitted(const Path& p, Vec3 o, Vec3 d, float t_geom, float* t_light, bool* absorbed) const {
-    const LightHit lh = NearestAreaLight(lights_, o, d, t_geom);
+    const LightHit lh = NearestAreaLight(lights_, area_, o, d, t_geom);
     *t_light = lh.t;
     if (lh.light >= 0) {
       *absorbed = true;
@@ -647,6 +650,7 @@ class Tracer {
   RTCScene handle_;
   const PathTraceOptions& options_;
   const std::vector<Light>& lights_;
+  const std::vector<int> area_;  // indices of the area lights in lights_
   std::vector<float> importance_;
   bool has_emission_ = false;
   TracerBuffers& b_;
@@ -657,7 +661,6 @@ class Tracer {
   std::vector<RTCRayHit>& stream_;
   std::vector<ShadowSample>& shadows_;
   std::vector<RTCRay>& shadow_stream_;
-  std::vector<RTCRay>& shadow_rays_;
 };
 
 // Runs fn(task) for every task on `pool` in one dynamic ParallelFor (no barriers between groups:
@@ -704,6 +707,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
   options.Validate();
   internal::SceneAccess::CheckCommitted(scene, "PathTrace");
   const std::vector<Light> lights = PrepareLights(scene);
+  const std::vector<int> area = AreaIndices(lights);
   Frame frame;
   frame.width = camera.width;
   frame.height = camera.height;
@@ -745,7 +749,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
     traced += n;
     for (size_t i = 0; i < n; ++i) {
       const size_t p = first + i;
-      const LightHit lh = NearestAreaLight(lights, centre[i].origin, centre[i].direction,
+      const LightHit lh = NearestAreaLight(lights, area, centre[i].origin, centre[i].direction,
                                            hits[i].object >= 0 ? hits[i].t : kInf);
       Vec3 normal;
       float z = 0;
