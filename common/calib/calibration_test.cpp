@@ -182,6 +182,13 @@ TEST(CalibrationTest, FieldOfViewGuessScalingAndCameraInfo) {
   EXPECT_EQ(info.distortion_count, 5u);
   EXPECT_EQ(info.distortion[4], 0.05);
   EXPECT_EQ(info.depth_scale, 0.001);
+
+  // Without distortion: plumb_bob with five zeros, as ROS writes an undistorted camera.
+  msgs::CameraInfo plain;
+  FillCameraInfo(guess, 0, plain);
+  EXPECT_EQ(plain.distortion_model, msgs::DistortionModel::kPlumbBob);
+  EXPECT_EQ(plain.distortion_count, 5u);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(plain.distortion[i], 0.0);
 }
 
 }  // namespace

@@ -429,7 +429,10 @@ TEST(TumTest, FreiburgIntrinsicsAndCameraInfoOverrides) {
     const std::unique_ptr<Source> source = OpenDataset(fr3.path);
     const auto info = View<msgs::CameraInfo>(*source->Next());
     EXPECT_EQ(info->fx, 535.4);
-    EXPECT_EQ(info->distortion_model, msgs::DistortionModel::kNone);
+    // No distortion is published as ROS writes it: plumb_bob with five zeros.
+    EXPECT_EQ(info->distortion_model, msgs::DistortionModel::kPlumbBob);
+    EXPECT_EQ(info->distortion_count, 5u);
+    EXPECT_EQ(info->distortion[0], 0.0);
   }
 
   // ROS camera_info YAML.

@@ -263,6 +263,12 @@ void FillCameraInfo(const Intrinsics& intrinsics, double depth_scale, msgs::Came
     out.distortion[i] = intrinsics.distortion[i];
     ++out.distortion_count;
   }
+  // A camera without distortion is published as ROS writes one: plumb_bob with five zeros.
+  if (out.distortion_model == msgs::DistortionModel::kNone) {
+    out.distortion_model = msgs::DistortionModel::kPlumbBob;
+    out.distortion_count = 5;
+    for (int i = 0; i < 5; ++i) out.distortion[i] = 0;
+  }
   out.depth_scale = depth_scale;
 }
 

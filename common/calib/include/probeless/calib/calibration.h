@@ -69,7 +69,8 @@ Intrinsics IntrinsicsFromFieldOfView(uint32_t width, uint32_t height,
 Intrinsics ScaleIntrinsics(const Intrinsics& intrinsics, uint32_t width, uint32_t height);
 
 // Fills the calibration fields of `out` (not its header) with `intrinsics` and `depth_scale`
-// (metres per depth unit, 0 without depth).
+// (metres per depth unit, 0 without depth). Intrinsics without distortion (model none) are
+// written as ROS writes an undistorted camera: plumb_bob with five zeros.
 void FillCameraInfo(const Intrinsics& intrinsics, double depth_scale, msgs::CameraInfo& out);
 
 }  // namespace probeless::calib
