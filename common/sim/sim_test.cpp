@@ -163,6 +163,9 @@ TEST(SimSource, FaceOrbitStream) {
         info->Validate();
         EXPECT_EQ(info->width, 160u);
         EXPECT_DOUBLE_EQ(info->depth_scale, 0.001);
+        EXPECT_EQ(info->distortion_model, msgs::DistortionModel::kPlumbBob);
+        EXPECT_EQ(info->distortion_count, 5u);
+        EXPECT_EQ(info->distortion[0], 0.0);
         break;
       }
       case 1:

@@ -426,7 +426,10 @@ class SimSource final : public dataset::Source {
       info->fy = f.camera.fy;
       info->cx = f.camera.cx;
       info->cy = f.camera.cy;
-      info->distortion_model = msgs::DistortionModel::kNone;
+      // A pinhole camera, written as ROS writes one: plumb_bob with five zeros.
+      info->distortion_model = msgs::DistortionModel::kPlumbBob;
+      info->distortion_count = 5;
+      for (int i = 0; i < 5; ++i) info->distortion[i] = 0;
       info->depth_scale = 0.001;
     }
     {
