@@ -13,7 +13,7 @@
 //    world-anchored sphere on the floor of a 640x480 G_r (floor 0.4 m below the camera, wall at
 //    2 m), per frame RasteriseObjects + DifferentialRenderer (SSDO of G_r and G_r' in the window,
 //    ratio tone, bounce light) + ApplyDifferential + Render with the real depth; full (step 1)
-//    and OursFast-style (step 2), and the light-to-composite latency of the full variant.
+//    and OursFast-style (step 2, the node's default), and the light-to-composite latency of step 2.
 // Prints the JSON object on stdout and writes it to OUT.
 #include <unistd.h>
 
@@ -184,11 +184,13 @@ int main(int argc, char** argv) {
     render::VirtualGeometry g_virtual;
     render::DifferentialResult g_result;
     std::vector<uint8_t> g_camera;
-    double g_transfer_ms = 0;
+    double g_transfer_ms = 0, g_raster_ms = 0, g_total_ms = 0;
     int g_changed = 0;
     auto coherent_frame = [&](render::DifferentialRenderer& dr) {
       render::RasterObject o{&ball.mesh.mesh, ball.object_to_anchor, {0.8f, 0.1f, 0.1f}, true};
+      const auto t_raster = Clock::now();
       render::RasteriseObjects(g_real, {&o, 1}, &g_virtual);
+      g_raster_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_raster).count();
       render::DifferentialFrame df;
       df.real = g_real;
       df.with_virtual = &g_virtual;
@@ -204,9 +206,10 @@ int main(int argc, char** argv) {
       gin.real_depth = g_depth;
       renderer.Render(gin, out);
       g_transfer_ms = g_result.ms_transfer;
+      g_total_ms = g_result.ms_total;
       g_changed = g_result.changed_pixels;
     };
-    auto run_coherent = [&](int step, double* transfer_ms) {
+    auto run_coherent = [&](int step, double* transfer_ms, double* raster_ms, double* diff_ms) {
       render::DifferentialOptions o;
       o.tone = render::DifferentialTone::kRatio;
       o.step = step;
@@ -214,24 +217,34 @@ int main(int argc, char** argv) {
       renderer.SetReceiverVisible(receiver_index, false);
       renderer.SetObjectVisible(0, false);
       renderer.SetObjectVisible(ball_index, true);
-      std::vector<double> ms, transfer;
+      std::vector<double> ms, transfer, raster, total;
       for (int f = 0; f < std::min(frames, 60) + 3; ++f) {
         in.light = Light(f * 0.05);
         const auto t0 = Clock::now();
         coherent_frame(dr);
         const double dt = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        if (f >= 3) ms.push_back(dt), transfer.push_back(g_transfer_ms);
+        if (f >= 3) {
+          ms.push_back(dt);
+          transfer.push_back(g_transfer_ms);
+          raster.push_back(g_raster_ms);
+          total.push_back(g_total_ms);
+        }
       }
       renderer.SetObjectVisible(0, true);
       renderer.SetObjectVisible(ball_index, false);
       *transfer_ms = Percentile(transfer, 0.5);
+      *raster_ms = Percentile(raster, 0.5);
+      *diff_ms = Percentile(total, 0.5);
       return ms;
     };
-    double coherent_transfer_ms = 0, coherent_fast_transfer_ms = 0;
-    const std::vector<double> coherent = run_coherent(1, &coherent_transfer_ms);
+    double coherent_transfer_ms = 0, coherent_fast_transfer_ms = 0, raster_ms = 0, diff_ms = 0,
+           fast_raster_ms = 0, fast_diff_ms = 0;
+    const std::vector<double> coherent =
+        run_coherent(1, &coherent_transfer_ms, &raster_ms, &diff_ms);
     const int coherent_window = g_result.window.width() * g_result.window.height();
     const int coherent_changed = g_changed;
-    const std::vector<double> coherent_fast = run_coherent(2, &coherent_fast_transfer_ms);
+    const std::vector<double> coherent_fast =
+        run_coherent(2, &coherent_fast_transfer_ms, &fast_raster_ms, &fast_diff_ms);
     size_t covered = 0;
     for (uint8_t c : out.coverage) covered += c;
 
@@ -250,6 +263,7 @@ int main(int argc, char** argv) {
     const int latency_frames = std::min(frames, 150);
     render::DifferentialOptions latency_options;
     latency_options.tone = render::DifferentialTone::kRatio;
+    latency_options.step = 2;  // the renderer node's default
     render::DifferentialRenderer latency_dr(latency_options);
     auto measure_latency = [&](bool differential, bool coherent) {
       renderer.SetReceiverVisible(receiver_index, differential);
@@ -323,6 +337,8 @@ int main(int argc, char** argv) {
         "\"gbuffer_changed_pixels\": %d, \"frame_ms_gbuffer_p50\": %.3f, "
         "\"frame_ms_gbuffer_p95\": %.3f, \"transfer_ms_gbuffer_p50\": %.3f, "
         "\"frame_ms_gbuffer_step2_p50\": %.3f, \"transfer_ms_gbuffer_step2_p50\": %.3f, "
+        "\"raster_ms_gbuffer_p50\": %.3f, \"differential_ms_gbuffer_p50\": %.3f, "
+        "\"differential_ms_gbuffer_step2_p50\": %.3f, "
         "\"latency_gbuffer_ms_p50\": %.3f, \"latency_gbuffer_ms_p95\": %.3f, "
         "\"lp_num_threads\": \"%s\"}",
         backend.c_str(), renderer.gl_version().c_str(), renderer.gl_renderer().c_str(), kW, kH,
@@ -334,7 +350,8 @@ int main(int argc, char** argv) {
         Percentile(latency_diff, 0.5), Percentile(latency_diff, 0.95), coherent_window,
         coherent_changed, Percentile(coherent, 0.5), Percentile(coherent, 0.95),
         coherent_transfer_ms, Percentile(coherent_fast, 0.5), coherent_fast_transfer_ms,
-        Percentile(latency_coherent, 0.5), Percentile(latency_coherent, 0.95),
+        fast_raster_ms, diff_ms, fast_diff_ms, Percentile(latency_coherent, 0.5),
+        Percentile(latency_coherent, 0.95),
         std::getenv("LP_NUM_THREADS") ? std::getenv("LP_NUM_THREADS") : "default");
     std::printf("%s\n", buffer);
     if (!json_path.empty()) {
