@@ -419,7 +419,11 @@ class Tracer {
       std::swap(active_, next_active_);
     }
     out.resize(n);
-    for (size_t i = 0; i < n; ++i) out[i] = paths_[i].radiance;
+    for (size_t i = 0; i < n; ++i) {
+      const Vec3 r = paths_[i].radiance;
+      // One numerically broken path must not poison a pixel: it counts as black.
+      out[i] = std::isfinite(r.x + r.y + r.z) ? r : Vec3{};
+    }
     return traced;
   }
 
@@ -497,7 +501,8 @@ class Tracer {
     if (m.emission.x > 0 || m.emission.y > 0 || m.emission.z > 0) {
       p.radiance += p.throughput * m.emission;
     }
-    if (p.final) return;
+    // A degenerate (zero-area) triangle has no normal to shade with: the path ends there.
+    if (p.final || Dot(s.geometric_normal, s.geometric_normal) == 0) return;
     const Vec3 wo = -ray.direction;
     // Interpolated normals can face away from the viewer at silhouettes: fall back to the facet.
     const Vec3 n = Dot(s.normal, wo) > 1e-4f ? s.normal : s.geometric_normal;
