@@ -218,6 +218,22 @@ TEST(TrackingQuality, BadOptionsThrowNamingTheField) {
   FusionOptions f;
   f.quality.warmup_frames = 0;
   EXPECT_THROW(FusionPipeline{f}, ReconError);
+  FramePyramid frame;
+  ModelPyramid model;
+  IcpOptions icp;
+  icp.observability_block = 0;
+  const Intrinsics k = TestIntrinsics();
+  Preprocess(testing::CornerScene().Render(Pose{}, k), k, PreprocessOptions{}, frame, nullptr);
+  GeometryView view;
+  view.points = frame.vertices[0];
+  view.normals = frame.normals[0];
+  BuildModelPyramid(view, Pose{}, k, 3, model);
+  try {
+    TrackIcp(frame, model, Pose{}, icp, nullptr);
+    ADD_FAILURE() << "no error";
+  } catch (const ReconError& e) {
+    EXPECT_STREQ(e.what(), "icp: observability_block must be >= 1, got 0");
+  }
 }
 
 // A floor (y = 0.45) and a back wall (z = 1.8) pin every direction but the slide along x; a left

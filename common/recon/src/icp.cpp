@@ -85,35 +85,53 @@ constexpr int kTasks = 16;
 // normals' noise variance, which otherwise shows as a constraint in every direction (a floor and
 // a wall seen through Kinect-like noise look as constrained along their intersection as a real
 // kitchen's weakest direction), while piecewise-planar geometry keeps its normals.
-void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, IcpResult& out) {
+void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, IcpResult& out,
+                          ThreadPool* pool) {
+  const int bw = vs.width / block, bh = vs.height / block;
+  // Per task in fixed rows of blocks, summed in task order: deterministic for any thread count.
+  struct Sum {
+    double a[21] = {};
+    double depth = 0;
+    int pairs = 0;
+  };
+  Sum sums[kTasks];
+  ParallelFor(pool, kTasks, [&](int task) {
+    Sum& sum = sums[task];
+    for (int by = bh * task / kTasks; by < bh * (task + 1) / kTasks; ++by)
+      for (int bx = 0; bx < bw; ++bx) {
+        Vec3f p{}, n{};
+        int count = 0;
+        // Every second pixel each way: neighbouring normals share their depth samples, so the
+        // other three add little averaging for four times the cost.
+        for (int y = by * block; y < (by + 1) * block; y += 2)
+          for (int x = bx * block; x < (bx + 1) * block; x += 2) {
+            const Vec3f v = vs.At(x, y), nv = ns.At(x, y);
+            if (v.z <= 0 || (nv.x == 0 && nv.y == 0 && nv.z == 0)) continue;
+            p = p + v;
+            n = n + nv;
+            ++count;
+          }
+        const int samples = ((block + 1) / 2) * ((block + 1) / 2);
+        if (2 * count < samples || Norm(n) < 0.5f * count) continue;
+        p = (1.0f / count) * p;
+        n = Normalized(n);
+        const Vec3f c = Cross(p, n);
+        const double j[6] = {c.x, c.y, c.z, n.x, n.y, n.z};
+        int idx = 0;
+        for (int i0 = 0; i0 < 6; ++i0)
+          for (int i1 = i0; i1 < 6; ++i1) sum.a[idx++] += j[i0] * j[i1];
+        sum.depth += p.z;
+        ++sum.pairs;
+      }
+  });
   std::fill(std::begin(out.normal_equations), std::end(out.normal_equations), 0.0);
   out.pairs = 0;
   double depth_sum = 0;
-  const int bw = vs.width / block, bh = vs.height / block;
-  for (int by = 0; by < bh; ++by)
-    for (int bx = 0; bx < bw; ++bx) {
-      Vec3f p{}, n{};
-      int count = 0;
-      for (int y = by * block; y < (by + 1) * block; ++y)
-        for (int x = bx * block; x < (bx + 1) * block; ++x) {
-          const Vec3f v = vs.At(x, y), nv = ns.At(x, y);
-          if (v.z <= 0 || (nv.x == 0 && nv.y == 0 && nv.z == 0)) continue;
-          p = p + v;
-          n = n + nv;
-          ++count;
-        }
-      if (2 * count < block * block) continue;
-      p = (1.0f / count) * p;
-      if (Norm(n) < 0.5f * count) continue;
-      n = Normalized(n);
-      const Vec3f c = Cross(p, n);
-      const double j[6] = {c.x, c.y, c.z, n.x, n.y, n.z};
-      int idx = 0;
-      for (int i0 = 0; i0 < 6; ++i0)
-        for (int i1 = i0; i1 < 6; ++i1) out.normal_equations[idx++] += j[i0] * j[i1];
-      depth_sum += p.z;
-      ++out.pairs;
-    }
+  for (const Sum& sum : sums) {
+    for (int i = 0; i < 21; ++i) out.normal_equations[i] += sum.a[i];
+    depth_sum += sum.depth;
+    out.pairs += sum.pairs;
+  }
   out.mean_depth_m = out.pairs > 0 ? static_cast<float>(depth_sum / out.pairs) : 0.0f;
 }
 }  // namespace
@@ -128,6 +146,10 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
                      std::to_string(frame.vertices.size()) + ", " +
                      std::to_string(model.points.size()) + ", " +
                      std::to_string(options.iterations.size()) + ")");
+  }
+  if (options.observability_block < 1) {
+    throw ReconError("icp: observability_block must be >= 1, got " +
+                     std::to_string(options.observability_block));
   }
   for (int l = 0; l < levels; ++l) {
     if (frame.vertices[offset + l].width != model.points[l].width ||
@@ -147,7 +169,7 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
   int valid0 = 0;
   for (const Vec3f& v : frame.vertices[offset].data) valid0 += v.z > 0;
   FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
-                       result);
+                       result, pool);
   for (int l = levels - 1; l >= 0; --l) {
     const Vec3Image& vs = frame.vertices[offset + l];
     const Vec3Image& ns = frame.normals[offset + l];

@@ -48,11 +48,11 @@ struct IcpResult {
   int iterations = 0;         // total iterations run
   std::string failure;        // why !ok, e.g. "too few correspondences (0.12 < 0.25)"
   // The point-to-plane normal matrix of the frame's level-0 geometry, one pair per
-  // IcpOptions::observability_block^2 pixels (the block's mean point p, metres, frame camera,
-  // and its renormalised mean normal n; blocks less than half valid are skipped): upper triangle
-  // (row-major, 21 values) of J^T J with J = (p x n, n), the block count and the blocks' mean
-  // depth (metres). The inputs of IcpObservability (tracking_quality.h); averaging keeps the
-  // normals' noise from posing as a constraint.
+  // IcpOptions::observability_block^2 pixels (sampled every second pixel each way; the block's mean
+  // point p, metres, frame camera, and its renormalised mean normal n; blocks less than half valid
+  // are skipped): upper triangle (row-major, 21 values) of J^T J with J = (p x n, n), the block
+  // count and the blocks' mean depth (metres). The inputs of IcpObservability (tracking_quality.h);
+  // averaging keeps the normals' noise from posing as a constraint.
   double normal_equations[21] = {};
   int pairs = 0;
   float mean_depth_m = 0;
@@ -63,7 +63,8 @@ void BuildModelPyramid(const GeometryView& view, const Pose& camera_to_world,
                        const Intrinsics& intrinsics, int levels, ModelPyramid& out);
 
 // Estimates the pose of `frame` against `model`, starting from `initial` (camera -> world).
-// Throws ReconError if the frame and model pyramids have different sizes or level counts.
+// Throws ReconError if the frame and model pyramids have different sizes or level counts, or
+// options.observability_block < 1.
 IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const Pose& initial,
                    const IcpOptions& options, ThreadPool* pool);
 
