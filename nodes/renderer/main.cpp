@@ -125,6 +125,10 @@ int Run(int argc, char** argv) {
                                              : render::DifferentialTone::kFixed;
   diff_options.key = static_cast<float>(node.Param("differential_key", 0.18));
   diff_options.indirect = node.Param("indirect", true);
+  // A bake with scene_mesh as occluder already has the real scene's shadows on the objects.
+  diff_options.virtual_occlusion =
+      node.Param("virtual_occlusion", content_options.scene_mesh.empty());
+  diff_options.virtual_bounce = node.Param("virtual_bounce", true);
   const std::vector<double> object_pixel = node.Param("object_pixel", std::vector<double>{});
   if (!object_pixel.empty() && (object_pixel.size() != 2 || mode != "scene")) {
     throw render::RenderError("param object_pixel: expected [u, v] (pixels) in scene mode, got " +
@@ -268,6 +272,12 @@ int Run(int argc, char** argv) {
       camera_diff = camera_rgb;
       render::ApplyDifferential(diff_result, width, height, camera_diff);
       in.camera_rgb = camera_diff;
+      if (!diff_result.virtual_modulation.empty()) {
+        const auto& vr = diff_result.virtual_rect;
+        in.virtual_rect = {vr.x0, vr.y0, vr.x1, vr.y1};
+        in.virtual_modulation = diff_result.virtual_modulation;
+        in.virtual_indirect = diff_result.virtual_indirect;
+      }
       diff_ms_sum += diff_result.ms_total;
       diff_changed_sum += diff_result.changed_pixels;
       ++diff_frames;

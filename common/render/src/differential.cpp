@@ -260,6 +260,43 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
     computer_->ComputeRegion(with, {}, nullptr, all, options_.average_step, &sparse);
     avg_with = LogAverage(sparse, f.light);
   }
+  if (options_.virtual_occlusion || (options_.virtual_bounce && indirect)) {
+    // The objects' own pixels: the real scene's share of their occlusion and bounce light.
+    const light::PixelRect& fp = gv->footprint;
+    virtual_mask_.assign(static_cast<size_t>(fp.width()) * fp.height(), 0);
+    virtual_depth_.assign(pixels, 0.0f);
+    for (int y = fp.y0; y < fp.y1; ++y) {
+      for (int x = fp.x0; x < fp.x1; ++x) {
+        const size_t p = static_cast<size_t>(y) * w + x;
+        if (gv->object_id[p] == 0) continue;
+        virtual_mask_[static_cast<size_t>(y - fp.y0) * fp.width() + (x - fp.x0)] = 1;
+        virtual_depth_[p] = gv->depth[p];
+      }
+    }
+    light::GeometryView only = with;
+    only.depth = virtual_depth_;
+    computer_->ComputeRegion(with, {}, dominant, fp, 1, &virtual_with_, virtual_mask_);
+    computer_->ComputeRegion(only, {}, dominant, fp, 1, &virtual_only_, virtual_mask_);
+    const size_t n = virtual_mask_.size();
+    const size_t vcc = static_cast<size_t>(virtual_with_.coefficient_count);
+    out->virtual_rect = fp;
+    out->virtual_modulation.assign(3 * n, 1.0f);
+    out->virtual_indirect.assign(3 * n, 0.0f);
+    for (size_t q = 0; q < n; ++q) {
+      if (!virtual_mask_[q] || !virtual_with_.valid[q]) continue;
+      const auto rv = ShadeTransfer({&virtual_with_.transfer[q * vcc], vcc}, f.light);
+      const auto ro = ShadeTransfer({&virtual_only_.transfer[q * vcc], vcc}, f.light);
+      for (int c = 0; c < 3; ++c) {
+        if (options_.virtual_occlusion && ro[c] > 1e-4f) {
+          out->virtual_modulation[3 * q + c] = std::clamp(rv[c] / ro[c], 0.0f, 1.0f);
+        }
+        if (indirect && options_.virtual_bounce) {
+          out->virtual_indirect[3 * q + c] =
+              std::max(0.0f, virtual_with_.indirect[3 * q + c] - virtual_only_.indirect[3 * q + c]);
+        }
+      }
+    }
+  }
   out->ms_transfer = MsSince(t_transfer);
   out->average_real = avg_real;
   out->average_with_virtual = avg_with;

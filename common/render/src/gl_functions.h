@@ -43,6 +43,7 @@
   X(PFNGLUNIFORM2FPROC, Uniform2f)                               \
   X(PFNGLUNIFORM3FPROC, Uniform3f)                               \
   X(PFNGLUNIFORM4FPROC, Uniform4f)                               \
+  X(PFNGLUNIFORM4IPROC, Uniform4i)                               \
   X(PFNGLUNIFORM4FVPROC, Uniform4fv)                             \
   X(PFNGLUNIFORMMATRIX4FVPROC, UniformMatrix4fv)                 \
   X(PFNGLGENVERTEXARRAYSPROC, GenVertexArrays)                   \

@@ -171,6 +171,7 @@ struct Renderer::Impl {
   GLuint diff_real = 0, diff_with = 0;
   GLuint out_fbo = 0, out_color = 0;
   GLuint camera_tex = 0, real_depth_tex = 0, indirect_tex = 0;
+  GLuint virtual_mod_tex = 0, virtual_add_tex = 0;
   std::vector<uint8_t> readback;
   std::vector<float> cpu_real, cpu_with;
   std::vector<GLuint> panel_textures;
@@ -251,9 +252,10 @@ struct Renderer::Impl {
 
   void ReleaseTargets() {
     gl.DeleteFramebuffers(1, &out_fbo);
-    const GLuint textures[] = {virtual_depth, diff_real,      diff_with,   out_color,
-                               camera_tex,    real_depth_tex, indirect_tex};
-    gl.DeleteTextures(7, textures);
+    const GLuint textures[] = {virtual_depth, diff_real,       diff_with,
+                               out_color,     camera_tex,      real_depth_tex,
+                               indirect_tex,  virtual_mod_tex, virtual_add_tex};
+    gl.DeleteTextures(9, textures);
   }
 
   void EnsureSize(int w, int h) {
@@ -277,6 +279,8 @@ struct Renderer::Impl {
     camera_tex = MakeTexture(GL_RGB8, w, h, GL_RGB, GL_UNSIGNED_BYTE);
     real_depth_tex = MakeTexture(GL_R32F, w, h, GL_RED, GL_FLOAT);
     indirect_tex = MakeTexture(GL_RGB32F, w, h, GL_RGB, GL_FLOAT);
+    virtual_mod_tex = MakeTexture(GL_RGB32F, w, h, GL_RGB, GL_FLOAT);
+    virtual_add_tex = MakeTexture(GL_RGB32F, w, h, GL_RGB, GL_FLOAT);
     gl.BindFramebuffer(GL_FRAMEBUFFER, 0);
   }
 
@@ -546,6 +550,18 @@ void Renderer::Render(const FrameInputs& in, Composite& out) {
     throw RenderError("frame: light bands " + std::to_string(in.light.bands) +
                       " out of range 1..5");
   }
+  const auto& vr = in.virtual_rect;
+  const bool virtual_shading = !in.virtual_modulation.empty();
+  if (virtual_shading) {
+    const size_t rect =
+        static_cast<size_t>(std::max(0, vr[2] - vr[0])) * std::max(0, vr[3] - vr[1]);
+    if (vr[0] < 0 || vr[1] < 0 || vr[2] > w || vr[3] > h || rect == 0 ||
+        in.virtual_modulation.size() != 3 * rect || in.virtual_indirect.size() != 3 * rect) {
+      throw RenderError(
+          "frame: virtual shading needs a rect inside the image and 3 values per "
+          "rect pixel in both buffers");
+    }
+  }
   m.EnsureSize(w, h);
 
   // Anchor frames: lights rotated into them, and their camera placements.
@@ -679,6 +695,18 @@ void Renderer::Render(const FrameInputs& in, Composite& out) {
     gl.ColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
   }
   m.SetCommonUniforms(m.object_program, in.camera);
+  gl.Uniform1i(m.Loc(m.object_program, "u_has_virtual"), virtual_shading ? 1 : 0);
+  if (virtual_shading) {
+    const int rw = vr[2] - vr[0], rh = vr[3] - vr[1];
+    gl.BindTexture(GL_TEXTURE_2D, m.virtual_mod_tex);
+    gl.TexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, rw, rh, GL_RGB, GL_FLOAT,
+                     in.virtual_modulation.data());
+    gl.BindTexture(GL_TEXTURE_2D, m.virtual_add_tex);
+    gl.TexSubImage2D(GL_TEXTURE_2D, 0, 0, 0, rw, rh, GL_RGB, GL_FLOAT, in.virtual_indirect.data());
+    gl.Uniform4i(m.Loc(m.object_program, "u_virtual_rect"), vr[0], vr[1], vr[2], vr[3]);
+    m.BindTexture(m.object_program, "u_virtual_mod", 1, m.virtual_mod_tex);
+    m.BindTexture(m.object_program, "u_virtual_add", 2, m.virtual_add_tex);
+  }
   for (const auto& o : m.objects) {
     if (!shown(o.anchor, o.visible)) continue;
     m.SetLight(m.object_program, anchor_light(o.anchor));

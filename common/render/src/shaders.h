@@ -49,6 +49,7 @@ uniform vec4 u_light_g[4];
 uniform vec4 u_light_b[4];
 uniform vec3 u_albedo;
 out vec3 v_radiance;
+out vec3 v_albedo;
 out vec2 v_uv;
 float Dot4(vec4 l[4]) {
   return dot(a_t0, l[0]) + dot(a_t1, l[1]) + dot(a_t2, l[2]) + dot(a_t3, l[3]);
@@ -58,18 +59,33 @@ void main() {
   gl_Position = Project(p.xyz);
   // Knorr & Kurz 2014 §4.3: per-vertex dot product of baked transfer and SH light.
   v_radiance = u_albedo * a_color * vec3(Dot4(u_light_r), Dot4(u_light_g), Dot4(u_light_b));
+  v_albedo = u_albedo * a_color;
   v_uv = a_uv;
 }
 )";
 
 inline constexpr const char* kObjectFs = R"(
 in vec3 v_radiance;
+in vec3 v_albedo;
 in vec2 v_uv;
 uniform sampler2D u_texture;
 uniform int u_has_texture;
+// Differential rendering from G_r on virtual pixels (render/differential.h): inside the pixel rect
+// u_virtual_rect (x0, y0, x1, y1), the radiance times the real scene's extra occlusion (rgb of
+// u_virtual_mod) plus the albedo times the bounce from the real scene (u_virtual_add).
+uniform int u_has_virtual;
+uniform ivec4 u_virtual_rect;
+uniform sampler2D u_virtual_mod;
+uniform sampler2D u_virtual_add;
 layout(location = 0) out vec4 o_color;
 void main() {
   vec3 r = v_radiance;
+  ivec2 px = ivec2(gl_FragCoord.xy);
+  if (u_has_virtual == 1 && px.x >= u_virtual_rect.x && px.y >= u_virtual_rect.y &&
+      px.x < u_virtual_rect.z && px.y < u_virtual_rect.w) {
+    ivec2 q = px - u_virtual_rect.xy;
+    r = r * texelFetch(u_virtual_mod, q, 0).rgb + v_albedo * texelFetch(u_virtual_add, q, 0).rgb;
+  }
   if (u_has_texture == 1) r *= texture(u_texture, vec2(v_uv.x, 1.0 - v_uv.y)).rgb;
   o_color = vec4(SrgbEncode(ToneMap(r)), 0.0);  // alpha 0 marks virtual coverage
 }

@@ -99,6 +99,11 @@ struct DifferentialOptions {
   float key = 0.18f;     // kAverageKey: Reinhard's middle grey a
   int average_step = 8;  // kAverageKey: the log-averages over every 8th pixel in x and y
   bool indirect = true;  // eq. 14-15 when a dominant light is given
+  // The virtual pixels too, for Renderer::Render's FrameInputs::virtual_*: the real scene's
+  // occlusion of them (R'_d of G_r' over R_v of the objects alone; off when their bake already
+  // had the real scene as occluder) and its bounce light onto them (R'_i - R_v,i).
+  bool virtual_occlusion = true;
+  bool virtual_bounce = true;
 };
 
 // One frame's input. `real` and `with_virtual` must have the same size and intrinsics.
@@ -123,7 +128,14 @@ struct DifferentialResult {
   light::PixelRect window;  // empty: nothing changes
   std::vector<float> factor;
   std::vector<float> indirect;
-  double ms_transfer = 0;  // wall time of the four SSDO buffers (R_d, R'_d with R_i, R'_i)
+  // The virtual pixels (virtual_occlusion or virtual_bounce; footprint rect, row-major within it, 3
+  // floats per pixel): their radiance factor clamp((R'_d . L) / (R_v . L), 0, 1) and the added
+  // radiance per unit albedo max(0, R'_i - R_v,i), with R_v the SSDO of the objects alone (G_r'
+  // without the real pixels); 1 and 0 elsewhere in the rect. Empty when no object is visible.
+  light::PixelRect virtual_rect;
+  std::vector<float> virtual_modulation;
+  std::vector<float> virtual_indirect;
+  double ms_transfer = 0;  // wall time of the SSDO buffers (R_d, R'_d with R_i, R'_i, R_v)
   // Window pixels whose factor is not 1 or whose I_i is not 0, and the smallest factor (red).
   int changed_pixels = 0;
   float min_factor = 1;
@@ -164,7 +176,10 @@ class DifferentialRenderer {
   std::unique_ptr<light::TransferComputer> computer_;
   light::TransferResult real_, with_;
   std::vector<uint8_t> real_colour_;
-  std::vector<uint8_t> mask_;  // the window's samples within reach of a virtual pixel
+  std::vector<uint8_t> mask_;         // the window's samples within reach of a virtual pixel
+  std::vector<float> virtual_depth_;  // G_r' depth with the real pixels removed (R_v)
+  std::vector<uint8_t> virtual_mask_;
+  light::TransferResult virtual_with_, virtual_only_;
 };
 
 // Applies `result` to the camera image in place (width x height x 3 sRGB bytes): c = sRGB(lin(c) *

@@ -135,6 +135,13 @@ struct FrameInputs {
   int transfer_count = 0;
   // Indirect buffer I_i (linear RGB, width * height * 3, already selected by eq. 14).
   std::span<const float> indirect_rgb;
+  // Shading of the virtual pixels from G_r' (render/differential.h) on the pixel rect [x0, x1) x
+  // [y0, y1): a virtual fragment's radiance becomes radiance * modulation + albedo * indirect (3
+  // floats per rect pixel each, row-major in the rect): the real scene's shadow on the objects and
+  // its bounce light onto them. Empty = unchanged.
+  std::array<int, 4> virtual_rect{0, 0, 0, 0};
+  std::span<const float> virtual_modulation;
+  std::span<const float> virtual_indirect;
 };
 
 // The composite: width * height * 3 sRGB bytes, top row first; coverage = 1 where a virtual object
