@@ -431,7 +431,9 @@ TEST(LightHold, BacklitFaceDoesNotBrightenTheVirtualObject) {
     EXPECT_LE(std::abs(b.coefficients[3][0]), last + 1e-9);
     last = std::abs(b.coefficients[3][0]);
     EXPECT_FLOAT_EQ(b.coefficients[0][0], side[0][0]);
-    if (k == 20) EXPECT_NEAR(b.weight, std::exp(-1.0), 1e-6);  // 2 s = blend_time_s
+    if (k == 20) {
+      EXPECT_NEAR(b.weight, std::exp(-1.0), 1e-6);  // 2 s = blend_time_s
+    }
     for (int ch = 0; ch < 3; ++ch) EXPECT_EQ(b.direction[ch], ch == 0 ? 1.f : 0.f);
   }
   // Without a held light: only the unreliable light's ambient term.
