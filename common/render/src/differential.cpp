@@ -262,38 +262,64 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
   }
   if (options_.virtual_occlusion || (options_.virtual_bounce && indirect)) {
     // The objects' own pixels: the real scene's share of their occlusion and bounce light.
+    // At every step-th pixel of the footprint (as the window), each virtual pixel taking its
+    // nearest sample of the same object.
     const light::PixelRect& fp = gv->footprint;
-    virtual_mask_.assign(static_cast<size_t>(fp.width()) * fp.height(), 0);
+    const int vw = (fp.width() + step - 1) / step, vh = (fp.height() + step - 1) / step;
+    auto sample_pixel = [&](int i, int j) {
+      return static_cast<size_t>(std::min(fp.y0 + j * step + step / 2, h - 1)) * w +
+             std::min(fp.x0 + i * step + step / 2, w - 1);
+    };
+    virtual_mask_.assign(static_cast<size_t>(vw) * vh, 0);
     virtual_depth_.assign(pixels, 0.0f);
     for (int y = fp.y0; y < fp.y1; ++y) {
       for (int x = fp.x0; x < fp.x1; ++x) {
         const size_t p = static_cast<size_t>(y) * w + x;
-        if (gv->object_id[p] == 0) continue;
-        virtual_mask_[static_cast<size_t>(y - fp.y0) * fp.width() + (x - fp.x0)] = 1;
-        virtual_depth_[p] = gv->depth[p];
+        if (gv->object_id[p] != 0) virtual_depth_[p] = gv->depth[p];
+      }
+    }
+    for (int j = 0; j < vh; ++j) {
+      for (int i = 0; i < vw; ++i) {
+        virtual_mask_[static_cast<size_t>(j) * vw + i] = gv->object_id[sample_pixel(i, j)] != 0;
       }
     }
     light::GeometryView only = with;
     only.depth = virtual_depth_;
-    computer_->ComputeRegion(with, {}, dominant, fp, 1, &virtual_with_, virtual_mask_);
-    computer_->ComputeRegion(only, {}, dominant, fp, 1, &virtual_only_, virtual_mask_);
-    const size_t n = virtual_mask_.size();
+    computer_->ComputeRegion(with, {}, dominant, fp, step, &virtual_with_, virtual_mask_);
+    computer_->ComputeRegion(only, {}, dominant, fp, step, &virtual_only_, virtual_mask_);
     const size_t vcc = static_cast<size_t>(virtual_with_.coefficient_count);
-    out->virtual_rect = fp;
-    out->virtual_modulation.assign(3 * n, 1.0f);
-    out->virtual_indirect.assign(3 * n, 0.0f);
-    for (size_t q = 0; q < n; ++q) {
+    std::vector<float> per_sample(6 * virtual_mask_.size());
+    for (size_t q = 0; q < virtual_mask_.size(); ++q) {
+      float* o = &per_sample[6 * q];
+      o[0] = o[1] = o[2] = 1;
+      o[3] = o[4] = o[5] = 0;
       if (!virtual_mask_[q] || !virtual_with_.valid[q]) continue;
       const auto rv = ShadeTransfer({&virtual_with_.transfer[q * vcc], vcc}, f.light);
       const auto ro = ShadeTransfer({&virtual_only_.transfer[q * vcc], vcc}, f.light);
       for (int c = 0; c < 3; ++c) {
-        if (options_.virtual_occlusion && ro[c] > 1e-4f) {
-          out->virtual_modulation[3 * q + c] = std::clamp(rv[c] / ro[c], 0.0f, 1.0f);
-        }
+        if (options_.virtual_occlusion && ro[c] > 1e-4f)
+          o[c] = std::clamp(rv[c] / ro[c], 0.0f, 1.0f);
         if (indirect && options_.virtual_bounce) {
-          out->virtual_indirect[3 * q + c] =
+          o[3 + c] =
               std::max(0.0f, virtual_with_.indirect[3 * q + c] - virtual_only_.indirect[3 * q + c]);
         }
+      }
+    }
+    const size_t n = static_cast<size_t>(fp.width()) * fp.height();
+    out->virtual_rect = fp;
+    out->virtual_modulation.assign(3 * n, 1.0f);
+    out->virtual_indirect.assign(3 * n, 0.0f);
+    for (int y = fp.y0; y < fp.y1; ++y) {
+      for (int x = fp.x0; x < fp.x1; ++x) {
+        const size_t p = static_cast<size_t>(y) * w + x;
+        if (gv->object_id[p] == 0) continue;
+        const int i = std::min((x - fp.x0) / step, vw - 1),
+                  j = std::min((y - fp.y0) / step, vh - 1);
+        const size_t q = static_cast<size_t>(j) * vw + i;
+        if (gv->object_id[sample_pixel(i, j)] != gv->object_id[p]) continue;
+        const size_t r = static_cast<size_t>(y - fp.y0) * fp.width() + (x - fp.x0);
+        std::copy_n(&per_sample[6 * q], 3, &out->virtual_modulation[3 * r]);
+        std::copy_n(&per_sample[6 * q + 3], 3, &out->virtual_indirect[3 * r]);
       }
     }
   }
