@@ -355,6 +355,27 @@ TEST(Differential, RealBoxShadowsAndLightsTheVirtualSphereRim) {
   EXPECT_GT(add[1] / n[1], 0.01) << "the lit box bounces onto the right rim";
   EXPECT_LT(add[0] / n[0], 0.01 * add[1] / n[1]);
 
+  // At the node's step 2 the rim keeps both effects (each virtual pixel takes its nearest sample).
+  render::DifferentialOptions fast;
+  fast.step = 2;
+  render::DifferentialRenderer fast_renderer(fast);
+  render::DifferentialResult r2;
+  fast_renderer.Compute(f, &r2);
+  ASSERT_EQ(r2.virtual_modulation.size(), r.virtual_modulation.size());
+  double mod2 = 0, add2 = 0;
+  int n2 = 0;
+  for (int v = vr.y0; v < vr.y1; ++v) {
+    for (int u = vr.x0; u < vr.x1; ++u) {
+      const size_t p = static_cast<size_t>(v) * kW + u;
+      if (g.object_id[p] == 0 || g.object_id[p + 2] != 0) continue;
+      mod2 += at(r2.virtual_modulation, p);
+      add2 += at(r2.virtual_indirect, p);
+      ++n2;
+    }
+  }
+  EXPECT_LT(mod2 / n2, 0.99);
+  EXPECT_GT(add2 / n2, 0.01);
+
   // Through the GL pass: the modulation and the added radiance reach the object's pixels.
   render::RendererOptions ro;
   ro.width = kW;
