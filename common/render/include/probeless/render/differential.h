@@ -88,8 +88,9 @@ struct DifferentialOptions {
   // seed; max_occluder_distance_m = 2 radius_m there). subsample is ignored (the window is
   // computed at every `step`-th pixel).
   light::TransferOptions transfer;
-  // Every step-th pixel of the window in x and y, the rest filled bilinearly from them (1 = every
-  // pixel; 2 = OursFast-style, about 4x faster).
+  // Every step-th pixel of the window (and of the virtual footprint) in x and y, the rest filled
+  // bilinearly (virtual pixels: the nearest sample of the same object); 1 = every pixel, 2 =
+  // OursFast-style, about 3x faster (render_bench).
   int step = 1;
   // Edge-aware separable box of this radius (samples) over the per-sample factors and I_i (real
   // pixels with depth within 3 % only): SSDO's 32 jittered directions leave a per-pixel dither
@@ -122,8 +123,8 @@ struct DifferentialFrame {
 
 // The result on the window: per pixel of `window` (row-major within it), the factor of eq. 13
 // (1 + T(R'_d) - T(R_d), RGB) and the I_i added after it (eq. 15, linear RGB in the camera's
-// response). Virtual pixels (drawn by the renderer) and pixels where R'_d == R_d and R'_i == R_i
-// get exactly 1 and 0.
+// response). Virtual pixels (drawn by the renderer) and pixels whose samples and their smoothing
+// neighbourhood have R'_d == R_d and R'_i == R_i get exactly 1 and 0.
 struct DifferentialResult {
   light::PixelRect window;  // empty: nothing changes
   std::vector<float> factor;
