@@ -1,6 +1,8 @@
 // fusion_eval: measures the reconstruction pipeline.
 //
 //   fusion_eval --sevenscenes DIR [--frames A-B] [--peer opencv] [--peer-frames N] --json OUT
+//               (--tum DIR instead: a TUM RGB-D folder, e.g. a generated scene, docs/sim.md; the
+//               same figures and options)
 //               [--mesh OUT.ply] [--poses OUT.txt] [--threads N] [--no-merge] [--verbose]
 //               [--volume-size M --volume-origin X,Y,Z [--volume-resolution N]]
 //   fusion_eval --sim SCENARIO [--frames A-B] --json OUT [--volume-size M] [--volume-origin X,Y,Z]
@@ -206,7 +208,8 @@ std::vector<Frame> LoadSevenScenes(const std::string& dir, int first, int last,
                                    recon::Intrinsics* k) {
   dataset::DatasetOptions options;
   options.max_frames = last > 0 ? static_cast<uint64_t>(last + 1) : 0;
-  auto source = dataset::OpenDataset("7scenes:" + dir, options);
+  // "tum:" folders (fusion_eval --tum) go through the same loader: same topics, depth in mm.
+  auto source = dataset::OpenDataset(dir.starts_with("tum:") ? dir : "7scenes:" + dir, options);
   std::vector<Frame> frames;
   Frame current;
   int index = 0;
@@ -787,6 +790,8 @@ int Run(int argc, char** argv) {
     };
     if (a == "--sevenscenes")
       sevenscenes = value();
+    else if (a == "--tum")
+      sevenscenes = "tum:" + value();
     else if (a == "--sim")
       sim_path = value();
     else if (a == "--frames")
@@ -825,7 +830,7 @@ int Run(int argc, char** argv) {
   if (json.empty()) throw UsageError("--json OUT is required");
   if (!peer.empty() && peer != "opencv") throw UsageError("--peer supports only 'opencv'");
   if (!sevenscenes.empty() == !sim_path.empty()) {
-    throw UsageError("give exactly one of --sevenscenes DIR and --sim SCENARIO");
+    throw UsageError("give exactly one of --sevenscenes DIR (or --tum DIR) and --sim SCENARIO");
   }
   recon::VolumeOptions seven_volume;
   if (volume_given) {

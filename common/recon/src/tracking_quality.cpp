@@ -109,6 +109,9 @@ void TrackingQualityOptions::Validate() const {
   if (!(nominal_frame_interval_s > 0)) {
     throw ReconError("tracking quality: nominal_frame_interval_s must be > 0");
   }
+  if (!(max_interval_scale >= 1)) {
+    throw ReconError("tracking quality: max_interval_scale must be >= 1");
+  }
   if (warmup_frames < 1) throw ReconError("tracking quality: warmup_frames must be >= 1");
   if (!(statistics_alpha > 0 && statistics_alpha <= 1)) {
     throw ReconError("tracking quality: statistics_alpha must be in (0, 1]");
@@ -202,7 +205,8 @@ TrackingQuality TrackingQualityMonitor::Assess(const IcpResult& icp, const Pose&
     // The step against the constant-velocity prediction, in the previous camera's frame.
     const Pose predicted = Predict(previous, interval_s);
     const Pose deviation = predicted.Inverse() * icp.camera_to_world;
-    const double scale = std::clamp(Interval(interval_s) / o.nominal_frame_interval_s, 1.0, 10.0);
+    const double scale =
+        std::clamp(Interval(interval_s) / o.nominal_frame_interval_s, 1.0, o.max_interval_scale);
     const double* t = deviation.t;
     q.motion_translation_m = static_cast<float>(std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]));
     q.motion_rotation_deg = static_cast<float>(deviation.RotationAngle() * 180.0 / kPi);

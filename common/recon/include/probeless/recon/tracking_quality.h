@@ -65,8 +65,10 @@ struct TrackingQualityOptions {
   float inlier_ratio_soft = 0.6f;
   float inlier_ratio_hard = 0.3f;
   // |step - predicted step| per nominal frame interval: translation (metres) and rotation
-  // (degrees); scaled by the frame interval / nominal_frame_interval_s (1..10) when the frames
-  // are further apart.
+  // (degrees); scaled by the frame interval / nominal_frame_interval_s, clamped to
+  // [1, max_interval_scale], when the frames are further apart (dropped frames, a relocalisation
+  // after a loss). The cap keeps a relocalisation after a long loss from accepting a slide: on a
+  // generated room a 17 cm wrong pose passed the uncapped 4-frame limits (20 cm).
   float motion_translation_good_m = 0.025f;
   float motion_translation_soft_m = 0.05f;
   float motion_translation_hard_m = 0.10f;
@@ -78,6 +80,7 @@ struct TrackingQualityOptions {
   float observability_soft = 0.005f;
   float observability_hard = 0.001f;
   double nominal_frame_interval_s = 1.0 / 30.0;
+  double max_interval_scale = 3.0;
   // Accepted frames before the residual and inlier cues apply (their running means need data).
   int warmup_frames = 5;
   // Weight of a new accepted frame in the running means (exponential, in (0, 1]).
@@ -128,10 +131,10 @@ class TrackingQualityMonitor {
 
   // Judges `icp` (estimated from `previous`, the pose of the previous frame, camera -> world)
   // for a frame `interval_s` seconds after it (<= 0: the nominal interval); the motion limits
-  // grow with interval_s / nominal_frame_interval_s (1..10). `relocalising`: the frame follows a
-  // loss, `previous` is the last good pose and `interval_s` the time since it; the verdict is
-  // then tracked or lost, never uncertain (kReasonRelocalising). `uncertain_run` consecutive
-  // uncertain frames precede this one. Does not change the monitor.
+  // grow with interval_s / nominal_frame_interval_s (1..max_interval_scale). `relocalising`: the
+  // frame follows a loss, `previous` is the last good pose and `interval_s` the time since it;
+  // the verdict is then tracked or lost, never uncertain (kReasonRelocalising). `uncertain_run`
+  // consecutive uncertain frames precede this one. Does not change the monitor.
   TrackingQuality Assess(const IcpResult& icp, const Pose& previous, double interval_s,
                          bool relocalising, int uncertain_run) const;
   // Records an accepted (integrated) frame: updates the running means and the velocity
