@@ -205,8 +205,12 @@ TrackingQuality TrackingQualityMonitor::Assess(const IcpResult& icp, const Pose&
     // The step against the constant-velocity prediction, in the previous camera's frame.
     const Pose predicted = Predict(previous, interval_s);
     const Pose deviation = predicted.Inverse() * icp.camera_to_world;
-    const double scale =
-        std::clamp(Interval(interval_s) / o.nominal_frame_interval_s, 1.0, o.max_interval_scale);
+    // A relocalisation gets the one-frame allowance around the extrapolated pose however long the
+    // loss: a slide repeated from the last good pose must not be accepted at the next try.
+    const double scale = relocalising
+                             ? 1.0
+                             : std::clamp(Interval(interval_s) / o.nominal_frame_interval_s, 1.0,
+                                          o.max_interval_scale);
     const double* t = deviation.t;
     q.motion_translation_m = static_cast<float>(std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]));
     q.motion_rotation_deg = static_cast<float>(deviation.RotationAngle() * 180.0 / kPi);

@@ -66,9 +66,9 @@ struct TrackingQualityOptions {
   float inlier_ratio_hard = 0.3f;
   // |step - predicted step| per nominal frame interval: translation (metres) and rotation
   // (degrees); scaled by the frame interval / nominal_frame_interval_s, clamped to
-  // [1, max_interval_scale], when the frames are further apart (dropped frames, a relocalisation
-  // after a loss). The cap keeps a relocalisation after a long loss from accepting a slide: on a
-  // generated room a 17 cm wrong pose passed the uncapped 4-frame limits (20 cm).
+  // [1, max_interval_scale], when the frames are further apart (dropped frames). A relocalisation
+  // is held to the unscaled limits around the extrapolated pose: with an allowance growing over
+  // the loss, relocalisations on generated rooms accepted the same 12-17 cm slide again and again.
   float motion_translation_good_m = 0.025f;
   float motion_translation_soft_m = 0.05f;
   float motion_translation_hard_m = 0.10f;
@@ -132,8 +132,9 @@ class TrackingQualityMonitor {
   // Judges `icp` (estimated from `previous`, the pose of the previous frame, camera -> world)
   // for a frame `interval_s` seconds after it (<= 0: the nominal interval); the motion limits
   // grow with interval_s / nominal_frame_interval_s (1..max_interval_scale). `relocalising`: the
-  // frame follows a loss, `previous` is the last good pose and `interval_s` the time since it;
-  // the verdict is then tracked or lost, never uncertain (kReasonRelocalising). `uncertain_run`
+  // frame follows a loss, `previous` is the last good pose and `interval_s` the time since it (the
+  // prediction extrapolates over it; the motion limits stay those of one frame); the verdict is
+  // then tracked or lost, never uncertain (kReasonRelocalising). `uncertain_run`
   // consecutive uncertain frames precede this one. Does not change the monitor.
   TrackingQuality Assess(const IcpResult& icp, const Pose& previous, double interval_s,
                          bool relocalising, int uncertain_run) const;
