@@ -12,6 +12,7 @@
 
 #include "bsdf.h"
 #include "embree_internal.h"
+#include "frame_buffers.h"
 #include "scene_access.h"
 #include "sh_basis.h"
 
@@ -317,21 +318,6 @@ struct ShadowSample {
   int light = -1;
 };
 
-void FillRay(const Ray& r, RTCRay& out) {
-  out.org_x = r.origin.x;
-  out.org_y = r.origin.y;
-  out.org_z = r.origin.z;
-  out.tnear = r.t_near;
-  out.dir_x = r.direction.x;
-  out.dir_y = r.direction.y;
-  out.dir_z = r.direction.z;
-  out.time = 0;
-  out.tfar = r.t_far;
-  out.mask = 0xFFFFFFFFu;
-  out.id = 0;
-  out.flags = 0;
-}
-
 struct Path {
   Rng rng;
   Vec3 throughput{1, 1, 1};
@@ -399,7 +385,8 @@ class Tracer {
     bool coherent = true;  // the first wave: camera rays of neighbouring pixels
     while (!active_.empty()) {
       stream_.resize(next_rays_.size());
-      for (size_t k = 0; k < next_rays_.size(); ++k) FillRay(next_rays_[k], stream_[k].ray);
+      for (size_t k = 0; k < next_rays_.size(); ++k)
+        internal::ToEmbree(next_rays_[k], stream_[k].ray);
       internal::IntersectStream(handle_, stream_.data(), stream_.size(), coherent);
       coherent = false;
       traced += stream_.size();
@@ -443,7 +430,7 @@ class Tracer {
     if (BlockedByAreaLight(s, ray)) return;
     shadows_.push_back(s);
     shadow_stream_.emplace_back();
-    FillRay(ray, shadow_stream_.back());
+    internal::ToEmbree(ray, shadow_stream_.back());
   }
 
   // MIS weight of a BSDF-sampled ray reaching light `l` at distance t.
@@ -713,16 +700,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
   internal::SceneAccess::CheckCommitted(scene, "PathTrace");
   const std::vector<Light> lights = PrepareLights(scene);
   const std::vector<int> area = AreaIndices(lights);
-  Frame frame;
-  frame.width = camera.width;
-  frame.height = camera.height;
-  const size_t pixels = static_cast<size_t>(camera.width) * camera.height;
-  frame.linear_rgb.assign(pixels * 3, 0);
-  frame.srgb.assign(pixels * 3, 0);
-  frame.depth_m.assign(pixels, 0);
-  frame.depth_mm.assign(pixels, 0);
-  frame.normals.assign(pixels * 3, 0);
-  frame.object_ids.assign(pixels, 0);
+  Frame frame = internal::EmptyFrame(camera.width, camera.height);
   const int rows = options.rows_per_task;
   const size_t tasks = (static_cast<size_t>(camera.height) + rows - 1) / rows;
   std::vector<uint64_t> rays_per_task(tasks, 0);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "frame_buffers.h"
 #include "sh_basis.h"
 
 namespace probeless::raytrace {
@@ -130,16 +131,7 @@ Frame Render(const Scene& scene, const Camera& camera, const RenderOptions& opti
   camera.Validate();
   if (options.bounce_samples < 1) throw RaytraceError("RenderOptions: bounce_samples must be >= 1");
   if (options.rows_per_task < 1) throw RaytraceError("RenderOptions: rows_per_task must be >= 1");
-  Frame frame;
-  frame.width = camera.width;
-  frame.height = camera.height;
-  const size_t pixels = static_cast<size_t>(camera.width) * camera.height;
-  frame.linear_rgb.assign(pixels * 3, 0);
-  frame.srgb.assign(pixels * 3, 0);
-  frame.depth_m.assign(pixels, 0);
-  frame.depth_mm.assign(pixels, 0);
-  frame.normals.assign(pixels * 3, 0);
-  frame.object_ids.assign(pixels, 0);
+  Frame frame = internal::EmptyFrame(camera.width, camera.height);
   const int rows = options.rows_per_task;
   const size_t tasks = (static_cast<size_t>(camera.height) + rows - 1) / rows;
   std::vector<uint64_t> rays_per_task(tasks, 0);
