@@ -110,6 +110,16 @@ TEST(Generate, ScenesAreDeterministicAndVaried) {
     const float distance = raytrace::Length(eye - a.insertions[0].position);
     EXPECT_GT(distance, 0.6f) << a.name;
     EXPECT_LT(distance, 3.2f) << a.name;
+    // Nothing stands between the first camera and an insertion resting on the table.
+    if (a.support_point.y > 0) {
+      raytrace::Scene scene;
+      BuildScene(a, false, &scene);
+      std::vector<raytrace::Ray> rays;
+      for (const InsertionObject& o : a.insertions) rays.push_back({eye, o.position - eye, 0, 1});
+      std::vector<raytrace::Hit> hits(rays.size());
+      scene.Intersect(rays, hits);
+      for (const raytrace::Hit& h : hits) EXPECT_EQ(h.object, -1) << a.name;
+    }
   }
   EXPECT_EQ(light_types, (std::set<std::string>{"area", "directional", "mixed", "point"}));
   EXPECT_EQ(rooms, (std::set<std::string>{"courtyard", "room"}));

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "denoise.h"
@@ -733,6 +734,40 @@ GeneratedScene GenerateScene(uint64_t seed, Split split, const GenerateOptions& 
     s.camera_path.push_back(pose);
   }
 
+  // The insertions must be seen: clutter or furniture between the first camera and an
+  // insertion's centre or top is removed (the table, walls and floor stay).
+  for (int pass = 0; pass < 4; ++pass) {
+    raytrace::Scene check;
+    BuildScene(s, false, &check);
+    const Transform& first = s.camera_path.front();
+    const Vec3 from{static_cast<float>(first.translation[0]),
+                    static_cast<float>(first.translation[1]),
+                    static_cast<float>(first.translation[2])};
+    std::vector<raytrace::Ray> rays;
+    for (const InsertionObject& o : s.insertions) {
+      const float top = o.shape == "sphere" ? o.radius : o.size.y / 2;
+      for (const Vec3 p : {o.position, o.position + Vec3{0, 0.8f * top, 0}}) {
+        rays.push_back({from, p - from, 0, 1});
+      }
+    }
+    std::vector<raytrace::Hit> hits(rays.size());
+    check.Intersect(rays, hits);
+    std::set<int> blockers;
+    for (const raytrace::Hit& hit : hits) {
+      if (hit.object < 0) continue;
+      const std::string& n = s.objects[static_cast<size_t>(hit.object)].name;
+      if (n.starts_with("table") || n.starts_with("wall") || n == "floor" ||
+          n.starts_with("ceiling")) {
+        continue;
+      }
+      blockers.insert(hit.object);
+    }
+    if (blockers.empty()) break;
+    for (auto it = blockers.rbegin(); it != blockers.rend(); ++it) {
+      s.objects.erase(s.objects.begin() + *it);
+    }
+  }
+
   // Kinect v1-like depth (as the shipped room_dynamic scenario), valid 0.4-6 m.
   s.sensor.depth_min_m = 0.4;
   s.sensor.depth_max_m = 6.0;
@@ -841,12 +876,17 @@ GeneratedSceneSummary WriteGeneratedScene(const GeneratedScene& scene,
     quick.samples_per_pixel = 4;
     quick.max_bounces = std::min(2, options.bounces);
     const raytrace::Frame f = raytrace::PathTrace(plain, preview, quick, &pool);
-    double sum = 0;
-    for (size_t p = 0; p < f.linear_rgb.size() / 3; ++p) {
-      sum += Luminance({f.linear_rgb[3 * p], f.linear_rgb[3 * p + 1], f.linear_rgb[3 * p + 2]});
+    // The log-average luminance (Reinhard's key): a lamp seen directly, a few very bright
+    // pixels, does not under-expose the frame as it would with the mean.
+    double log_sum = 0;
+    const size_t n = f.linear_rgb.size() / 3;
+    for (size_t p = 0; p < n; ++p) {
+      const double l =
+          Luminance({f.linear_rgb[3 * p], f.linear_rgb[3 * p + 1], f.linear_rgb[3 * p + 2]});
+      log_sum += std::log(1e-4 + std::max(0.0, l));
     }
-    const double mean = sum / std::max<size_t>(1, f.linear_rgb.size() / 3);
-    summary.exposure = std::clamp(mean > 0 ? 0.18 / mean : 1.0, 1e-3, 1e3);
+    const double key = std::exp(log_sum / static_cast<double>(std::max<size_t>(1, n)));
+    summary.exposure = std::clamp(key > 0 ? 0.18 / key : 1.0, 1e-3, 1e3);
   }
   pt.exposure = static_cast<float>(summary.exposure);
 
