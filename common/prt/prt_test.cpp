@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
@@ -164,6 +165,30 @@ TEST(PrtTest, FileRoundTripAndErrors) {
     FAIL();
   } catch (const PrtError& e) {
     EXPECT_EQ(std::string(e.what()), path + ": truncated triangles");
+  }
+  // A header asking for 2^28 vertices in a file of 44 bytes: refused from the file size, before
+  // any allocation.
+  {
+    std::string header(44, '\0');
+    std::memcpy(header.data(), "PBLPRT01", 8);
+    const uint32_t fields[4] = {3, 1u << 28, 1u << 28, 0};
+    std::memcpy(header.data() + 8, fields, sizeof(fields));
+    const std::string huge = TempPath("huge.prt");
+    std::ofstream(huge, std::ios::binary) << header;
+    try {
+      LoadPrt(huge);
+      FAIL();
+    } catch (const PrtError& e) {
+      EXPECT_EQ(std::string(e.what()), huge + ": truncated positions");
+    }
+    // The baked file one byte longer than its header says: trailing bytes.
+    std::filesystem::resize_file(path, size + 1);
+    try {
+      LoadPrt(path);
+      FAIL();
+    } catch (const PrtError& e) {
+      EXPECT_EQ(std::string(e.what()), path + ": trailing bytes");
+    }
   }
   EXPECT_THROW(Bake(raytrace::Mesh{}, {}, options), PrtError);
   options.bands = 6;

@@ -5,6 +5,7 @@
 // f32 transfer[V][bands^2].
 #include <bit>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 #include "probeless/prt/prt.h"
@@ -79,6 +80,24 @@ TransferMesh LoadPrt(const std::string& path) {
     throw PrtError(path + ": malformed header (vertex_count " + std::to_string(h.vertex_count) +
                    ", triangle_count " + std::to_string(h.triangle_count) + ", flags " +
                    std::to_string(h.flags) + ")");
+  }
+  // The header's counts are checked against the file's size before anything is allocated: a
+  // short file must not ask for gigabytes.
+  {
+    std::error_code error;
+    const uintmax_t file_bytes = std::filesystem::file_size(path, error);
+    if (error) throw PrtError(path + ": cannot read its size (" + error.message() + ")");
+    const uint64_t v = h.vertex_count;
+    const uint64_t sections[5] = {12 * v, 12 * v, (h.flags & 1u) ? 12 * v : 0,
+                                  12 * static_cast<uint64_t>(h.triangle_count),
+                                  4 * v * h.bands * h.bands};
+    const char* names[5] = {"positions", "normals", "colours", "triangles", "transfer"};
+    uint64_t end = sizeof(h);
+    for (int k = 0; k < 5; ++k) {
+      end += sections[k];
+      if (end > file_bytes) throw PrtError(path + ": truncated " + names[k]);
+    }
+    if (end < file_bytes) throw PrtError(path + ": trailing bytes");
   }
   TransferMesh m;
   m.bands = static_cast<int>(h.bands);
