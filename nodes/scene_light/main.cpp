@@ -156,8 +156,7 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   }
   // gbuffer mode: the shadow search on the frame's own depth image (aligned with the camera image,
   // with the image cues) instead of G_r, whose merged depth and the image disagree at shadow edges
-  // (fused courtyard_sun 7.6 -> 4.0 deg, courtyard_grey 9.8 -> 6.8, room_daylight 8.8 -> 6.1;
-  // docs/light.md "Cast shadows").
+  // (measured in docs/light.md "Cast shadows").
   const std::string shadow_depth = node.Param("shadow_depth", "raw");
   if (shadow_depth != "raw" && shadow_depth != "gbuffer") {
     throw node::UsageError("scene_light: shadow_depth must be raw or gbuffer, got '" +

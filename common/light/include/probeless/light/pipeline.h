@@ -40,8 +40,7 @@ enum class GBufferNormals {
 // The geometry of the shadow search for a G-buffer input (the node's `shadow_depth`).
 enum class ShadowGeometry {
   // SceneFrame::depth_image when given (aligned with the camera image, while G_r's merged depth
-  // is not at shadow edges: fused courtyard_sun 7.6 -> 4.0 deg; docs/light.md "Cast shadows"),
-  // else the G-buffer.
+  // is not at shadow edges; measured in docs/light.md "Cast shadows"), else the G-buffer.
   kDepthImage,
   kGeometryBuffer,  // always the G-buffer
 };
