@@ -719,14 +719,8 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
     uint64_t traced = 0;
 
     // The pixel-centre rays: depth, normals and ids exactly as Render defines them.
-    std::vector<Ray> centre(n);
-    for (int y = y0; y < y1; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        const Vec3 d_cam{static_cast<float>((x - camera.cx) / camera.fx),
-                         static_cast<float>((y - camera.cy) / camera.fy), 1.0f};
-        centre[static_cast<size_t>(y - y0) * camera.width + x] = Ray{eye, rot * d_cam, 0, 1e30f};
-      }
-    }
+    std::vector<Ray> centre;
+    internal::PixelCentreRays(camera, eye, y0, y1, centre);
     std::vector<Hit> hits(n);
     scene.Intersect(centre, hits);
     traced += n;
@@ -749,6 +743,7 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
         normal = s.normal;
         z = hits[i].t;
         id = s.object_id;
+        for (int c = 0; c < 3; ++c) frame.albedo[3 * p + c] = s.albedo[c];
       } else {
         continue;
       }

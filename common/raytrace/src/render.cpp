@@ -147,14 +147,8 @@ Frame Render(const Scene& scene, const Camera& camera, const RenderOptions& opti
     const int y1 = std::min(camera.height, y0 + rows);
     const size_t first = static_cast<size_t>(y0) * camera.width;
     const size_t n = static_cast<size_t>(y1 - y0) * camera.width;
-    std::vector<Ray> primary(n);
-    for (int y = y0; y < y1; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        const Vec3 d_cam{static_cast<float>((x - camera.cx) / camera.fx),
-                         static_cast<float>((y - camera.cy) / camera.fy), 1.0f};
-        primary[static_cast<size_t>(y - y0) * camera.width + x] = Ray{eye, rot * d_cam, 0, 1e30f};
-      }
-    }
+    std::vector<Ray> primary;
+    internal::PixelCentreRays(camera, eye, y0, y1, primary);
     std::vector<Hit> hits(n);
     scene.Intersect(primary, hits);
     uint64_t ray_count = n;
@@ -184,6 +178,7 @@ Frame Render(const Scene& scene, const Camera& camera, const RenderOptions& opti
       frame.normals[3 * p + 1] = n_cam.y;
       frame.normals[3 * p + 2] = n_cam.z;
       frame.object_ids[p] = s.object_id;
+      for (int c = 0; c < 3; ++c) frame.albedo[3 * p + c] = s.albedo[c];
       radiance[i] = EnvironmentShading(env, s);
       CollectLights(scene, s, Normalize(-primary[i].direction), i, options.ray_epsilon, shadow_rays,
                     samples);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "probeless/parallel/thread_pool.h"
@@ -16,9 +17,9 @@ namespace probeless::sim::internal {
 struct DenoiseGuides {
   int width = 0;
   int height = 0;
-  std::vector<float> albedo;
-  std::vector<float> normal;
-  std::vector<float> depth;
+  std::span<const float> albedo;  // borrowed: the frame's own images, not copies
+  std::span<const float> normal;
+  std::span<const float> depth;
   std::vector<uint8_t> keep;
 };
 

@@ -200,46 +200,26 @@ cv::Mat RgbToBgrMat(const std::vector<uint8_t>& rgb, int w, int h) {
   return bgr;
 }
 
-// Denoises a path-traced frame in place (linear_rgb, then srgb) with the first-hit albedo of
-// `scene` as guide; emitters seen directly (no mesh hit at the frame's depth) are left as traced.
-void Denoise(const raytrace::Scene& scene, const raytrace::Camera& camera, raytrace::Frame& f,
-             raytrace::ThreadPool* pool) {
-  const int w = camera.width;
-  const int h = camera.height;
-  const size_t n = static_cast<size_t>(w) * h;
-  std::vector<raytrace::Ray> rays(n);
-  const Transform& pose = camera.camera_to_world;
-  const Vec3 eye{static_cast<float>(pose.translation[0]), static_cast<float>(pose.translation[1]),
-                 static_cast<float>(pose.translation[2])};
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const Vec3 d{static_cast<float>((x - camera.cx) / camera.fx),
-                   static_cast<float>((y - camera.cy) / camera.fy), 1.0f};
-      rays[static_cast<size_t>(y) * w + x] = {eye, pose.rotation * d, 0, 1e30f};
-    }
-  }
-  std::vector<raytrace::Hit> hits(n);
-  scene.Intersect(rays, hits, pool);
+// Denoises a path-traced frame in place (linear_rgb, then srgb) guided by its first-hit albedo,
+// normals and depth; pixels without an albedo to demodulate by (emitters seen directly, black
+// surfaces) are left as traced.
+void Denoise(raytrace::Frame& f, raytrace::ThreadPool* pool) {
+  const size_t n = static_cast<size_t>(f.width) * f.height;
   internal::DenoiseGuides g;
-  g.width = w;
-  g.height = h;
-  g.albedo.assign(3 * n, 1);
+  g.width = f.width;
+  g.height = f.height;
+  g.albedo = f.albedo;
   g.normal = f.normals;
   g.depth = f.depth_m;
   g.keep.assign(n, 0);
   for (size_t p = 0; p < n; ++p) {
-    if (f.depth_m[p] <= 0) continue;
-    // t is the optical-axis depth here (the ray direction has z = 1 in the camera frame).
-    if (hits[p].object < 0 || std::abs(hits[p].t - f.depth_m[p]) > 1e-3f * f.depth_m[p] + 1e-4f) {
-      g.keep[p] = 1;
-      continue;
-    }
-    const Vec3 a = scene.Surface(rays[p], hits[p]).albedo;
-    for (int c = 0; c < 3; ++c) g.albedo[3 * p + c] = a[c];
+    const float* a = &f.albedo[3 * p];
+    g.keep[p] = f.depth_m[p] > 0 && a[0] == 0 && a[1] == 0 && a[2] == 0;
   }
   internal::DenoiseAtrous(g, f.linear_rgb, pool);
-  for (size_t i = 0; i < f.linear_rgb.size(); ++i)
+  for (size_t i = 0; i < f.linear_rgb.size(); ++i) {
     f.srgb[i] = raytrace::LinearToSrgb8(f.linear_rgb[i]);
+  }
 }
 
 }  // namespace
@@ -876,16 +856,22 @@ GeneratedSceneSummary WriteGeneratedScene(const GeneratedScene& scene,
     quick.samples_per_pixel = 4;
     quick.max_bounces = std::min(2, options.bounces);
     const raytrace::Frame f = raytrace::PathTrace(plain, preview, quick, &pool);
-    // The log-average luminance (Reinhard's key): a lamp seen directly, a few very bright
-    // pixels, does not under-expose the frame as it would with the mean.
-    double log_sum = 0;
+    // The mean luminance with the brightest tenth clipped to the 90th percentile: a lamp seen
+    // directly does not under-expose the frame, and the preview's noisy black pixels (which a
+    // log-average would weigh heavily) do not over-expose it.
     const size_t n = f.linear_rgb.size() / 3;
+    std::vector<float> l(n);
     for (size_t p = 0; p < n; ++p) {
-      const double l =
-          Luminance({f.linear_rgb[3 * p], f.linear_rgb[3 * p + 1], f.linear_rgb[3 * p + 2]});
-      log_sum += std::log(1e-4 + std::max(0.0, l));
+      l[p] = std::max(
+          0.0f, Luminance({f.linear_rgb[3 * p], f.linear_rgb[3 * p + 1], f.linear_rgb[3 * p + 2]}));
     }
-    const double key = std::exp(log_sum / static_cast<double>(std::max<size_t>(1, n)));
+    std::vector<float> sorted = l;
+    const size_t k = std::min(n - 1, n * 9 / 10);
+    std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(k), sorted.end());
+    const float clip = sorted[k];
+    double sum = 0;
+    for (float v : l) sum += std::min(v, clip);
+    const double key = sum / static_cast<double>(std::max<size_t>(1, n));
     summary.exposure = std::clamp(key > 0 ? 0.18 / key : 1.0, 1e-3, 1e3);
   }
   pt.exposure = static_cast<float>(summary.exposure);
@@ -994,8 +980,8 @@ GeneratedSceneSummary WriteGeneratedScene(const GeneratedScene& scene,
     raytrace::Frame a = raytrace::PathTrace(plain, camera, frame_options, &pool);
     raytrace::Frame b = raytrace::PathTrace(inserted, camera, frame_options, &pool);
     if (options.denoise) {
-      Denoise(plain, camera, a, &pool);
-      Denoise(inserted, camera, b, &pool);
+      Denoise(a, &pool);
+      Denoise(b, &pool);
     }
 
     // The dominant light alone, direct only: its image-space share of the light.

@@ -48,6 +48,9 @@ struct Frame {
   std::vector<float> normals;        // 3 per pixel, unit shading normal in the camera frame
                                      // (facing the camera); (0, 0, 0) = no hit
   std::vector<uint32_t> object_ids;  // the hit object's id; 0 = background
+  std::vector<float> albedo;         // 3 per pixel, linear albedo of the first mesh surface seen
+                                     // (SurfacePoint::albedo); (0, 0, 0) = none (background, or
+                                     // PathTrace's area light seen directly)
   uint64_t rays = 0;                 // rays traced for this frame (primary, shadow, bounce)
 };
 
