@@ -1,0 +1,114 @@
+// The number parser's rules and its exact messages (tools' tests assert them through their CLIs).
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+
+#include "probeless/parse/number.h"
+
+namespace probeless::parse {
+namespace {
+
+template <class F>
+std::string MessageOf(F&& f) {
+  try {
+    f();
+  } catch (const NumberError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST(ParseInteger, AcceptsWholeDecimalIntegers) {
+  EXPECT_EQ(ParseInteger<int>("--n", "12"), 12);
+  EXPECT_EQ(ParseInteger<int>("--n", "+12"), 12);
+  EXPECT_EQ(ParseInteger<int>("--n", "-12"), -12);
+  EXPECT_EQ(ParseInteger<int>("--n", "0007"), 7);
+  EXPECT_EQ(ParseInteger<uint64_t>("--n", "18446744073709551615"), UINT64_MAX);
+  EXPECT_EQ(ParseInteger<int64_t>("--n", "-9223372036854775808"), INT64_MIN);
+  EXPECT_EQ(ParseInteger<uint8_t>("--n", "255"), 255);
+}
+
+TEST(ParseInteger, RejectsPartialAndMalformedText) {
+  for (const char* bad : {"12abc", "abc", "", " 12", "12 ", "1.5", "1e3", "0x10", "+", "-", "+-1",
+                          "++1", "--1", "1-"}) {
+    EXPECT_FALSE(TryParseInteger<int>(bad)) << bad;
+    EXPECT_FALSE(TryParseInteger<uint64_t>(bad)) << bad;
+  }
+}
+
+TEST(ParseInteger, MessagesNameTheInputAndTheExpectation) {
+  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--max-frames", "12abc"); }),
+            "--max-frames expects a non-negative integer, got '12abc'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--chunk-size", "-1", 1); }),
+            "--chunk-size expects a positive integer, got '-1'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--chunk-size", "99999999999999999999", 1); }),
+            "--chunk-size expects a positive integer up to 18446744073709551615, got "
+            "'99999999999999999999'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("device", "99999999999999999999", 0); }),
+            "device expects a non-negative integer up to 2147483647, got '99999999999999999999'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--x", "-99999999999"); }),
+            "--x expects an integer down to -2147483648, got '-99999999999'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--x", "4 2"); }),
+            "--x expects an integer, got '4 2'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--level", "7", 0, 3); }),
+            "--level expects an integer in [0, 3], got '7'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<uint16_t>("--port", "70000", 1); }),
+            "--port expects a positive integer up to 65535, got '70000'");
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--n", "0", 1); }),
+            "--n expects a positive integer, got '0'");
+  // A newline from a file stays on the message's one line.
+  EXPECT_EQ(MessageOf([] { ParseInteger<int>("count", "3\n"); }),
+            "count expects an integer, got '3\\x0a'");
+}
+
+TEST(ParseDouble, AcceptsFixedAndScientific) {
+  EXPECT_DOUBLE_EQ(ParseDouble("--fps", "30"), 30);
+  EXPECT_DOUBLE_EQ(ParseDouble("--fps", "+2.5"), 2.5);
+  EXPECT_DOUBLE_EQ(ParseDouble("--fps", "-2e-3"), -2e-3);
+  EXPECT_DOUBLE_EQ(ParseDouble("--fps", ".5"), 0.5);
+  EXPECT_DOUBLE_EQ(ParseDouble("--fps", "5."), 5);
+  EXPECT_GT(ParseDouble("--fps", "1e-310"), 0);  // a denormal is a value
+}
+
+TEST(ParseDouble, RejectsPartialNonFiniteAndOutOfRange) {
+  for (const char* bad : {"12abc", "", " 1", "1 ", "inf", "-inf", "nan", "infinity", "0x10", "1e",
+                          "1e+", "1e400", "-1e400", "1e-400", "+-1", "1,5", "."}) {
+    EXPECT_FALSE(TryParseDouble(bad)) << bad;
+  }
+  EXPECT_FALSE(TryParseDouble("2", 0, 1));
+  EXPECT_TRUE(TryParseDouble("1", 0, 1));
+}
+
+TEST(ParseDouble, Messages) {
+  EXPECT_EQ(MessageOf([] { ParseDouble("--fps", "30fps"); }),
+            "--fps expects a number, got '30fps'");
+  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "-1", 0); }),
+            "--gain expects a non-negative number, got '-1'");
+  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "0.1", 0.5); }),
+            "--gain expects a number >= 0.5, got '0.1'");
+  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "3", std::numeric_limits<double>::lowest(), 2); }),
+            "--gain expects a number <= 2, got '3'");
+  EXPECT_EQ(MessageOf([] { ParseDouble("albedo", "1.5", 0, 1); }),
+            "albedo expects a number in [0, 1], got '1.5'");
+  EXPECT_EQ(MessageOf([] { ParsePositiveDouble("--fps", "0"); }),
+            "--fps expects a positive number, got '0'");
+  EXPECT_EQ(MessageOf([] { ParsePositiveDouble("--fps", "nan"); }),
+            "--fps expects a positive number, got 'nan'");
+}
+
+TEST(ParseFloat, RangeOfFloat) {
+  EXPECT_FLOAT_EQ(ParseFloat("--scale", "0.25"), 0.25f);
+  EXPECT_EQ(MessageOf([] { ParseFloat("--scale", "1e39"); }),
+            "--scale expects a number, got '1e39'");
+  EXPECT_EQ(MessageOf([] { ParseFloat("--scale", "2", 0, 1); }),
+            "--scale expects a number in [0, 1], got '2'");
+}
+
+TEST(NumberError, IsInvalidArgument) {
+  // node::RunMain maps std::invalid_argument to exit code 2; tools rely on that.
+  EXPECT_THROW(ParseInteger<int>("--n", "x"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace probeless::parse
