@@ -105,6 +105,23 @@ TEST(ParseFloat, RangeOfFloat) {
             "--scale expects a number in [0, 1], got '2'");
 }
 
+TEST(ParseList, CountAndItems) {
+  EXPECT_EQ(ParseDoubleList("--origin", "1,-2.5,3", 3, 3), (std::vector<double>{1, -2.5, 3}));
+  EXPECT_EQ(ParseIntegerList<int>("--icp", "10,5", 1, 3, 1), (std::vector<int>{10, 5}));
+  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,2", 3, 3); }),
+            "--origin expects 3 comma-separated numbers, got '1,2'");
+  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,2,3,", 3, 3); }),
+            "--origin expects 3 comma-separated numbers, got '1,2,3,'");
+  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("--k", "", 1, 2); }),
+            "--k item 1 expects an integer, got ''");
+  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,y,3", 3, 3); }),
+            "--origin item 2 expects a number, got 'y'");
+  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("FUSION_EVAL_ICP", "10,5,-4", 3, 3, 1); }),
+            "FUSION_EVAL_ICP item 3 expects a positive integer, got '-4'");
+  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("--k", "1,2,3", 1, 2); }),
+            "--k expects 1 to 2 comma-separated numbers, got '1,2,3'");
+}
+
 TEST(NumberError, IsInvalidArgument) {
   // node::RunMain maps std::invalid_argument to exit code 2; tools rely on that.
   EXPECT_THROW(ParseInteger<int>("--n", "x"), std::invalid_argument);

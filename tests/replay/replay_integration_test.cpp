@@ -35,6 +35,8 @@ const std::string kLaunchFile = PROBELESS_SOURCE_DIR "/tests/replay/lockstep.lau
 using Result = probeless::testing::CommandResult;
 using probeless::testing::ReadText;
 
+std::string FirstLine(const std::string& text) { return text.substr(0, text.find('\n')); }
+
 class ReplayIntegrationTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -220,6 +222,27 @@ TEST_F(ReplayIntegrationTest, BadInputGivesOneLineErrorsAndExitCode2) {
   r = Run(kBin + "/probeless bag convert only_one_argument");
   EXPECT_EQ(r.code, 2);
   EXPECT_THAT(r.err, HasSubstr("convert takes SOURCE and OUT.mcap"));
+  // Numbers are parsed whole and range-checked (parse::ParseInteger): issue #22's three cases.
+  const std::string folder = WriteImageFolder(2).string();
+  const std::string out = (dir_ / "bad.mcap").string();
+  r = Run(kBin + "/probeless bag convert " + folder + " " + out +
+          " --chunk-size 99999999999999999999");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(FirstLine(r.err),
+            "probeless bag: convert: --chunk-size expects a positive integer up to "
+            "18446744073709551615, got '99999999999999999999'");
+  r = Run(kBin + "/probeless bag convert " + folder + " " + out + " --chunk-size -1");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(FirstLine(r.err),
+            "probeless bag: convert: --chunk-size expects a positive integer, got '-1'");
+  r = Run(kBin + "/probeless bag convert " + folder + " " + out + " --max-frames 12abc");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(FirstLine(r.err),
+            "probeless bag: convert: --max-frames expects a non-negative integer, got '12abc'");
+  r = Run(kBin + "/probeless bag convert " + folder + " " + out + " --fps 0");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(FirstLine(r.err), "probeless bag: convert: --fps expects a positive number, got '0'");
+  EXPECT_FALSE(fs::exists(out));
   r = Run(kBin + "/probeless bag frobnicate");
   EXPECT_EQ(r.code, 2);
   EXPECT_THAT(r.err, HasSubstr("unknown command 'frobnicate'"));

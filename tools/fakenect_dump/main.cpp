@@ -16,6 +16,7 @@
 
 #include "probeless/capture/convert.h"
 #include "probeless/msgs/image.h"
+#include "probeless/parse/number.h"
 #include "probeless/replay/sources.h"
 
 namespace {
@@ -27,6 +28,13 @@ class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+constexpr const char* kUsage =
+    "usage: fakenect_dump SOURCE OUT_DIR [--max-frames N] [--fps F]\n"
+    "  SOURCE        a dataset folder (7-Scenes, TUM RGB-D) or an MCAP log with colour and depth\n"
+    "  OUT_DIR       the fakenect dump (INDEX.txt, r-*.ppm, d-*.pgm), created\n"
+    "  --max-frames  at most N colour and N depth frames (default 0: all)\n"
+    "  --fps         frame rate of sources without time stamps (default 30)\n";
 
 void WriteFile(const fs::path& path, const std::string& header, const void* data, size_t bytes) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
@@ -45,10 +53,13 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw UsageError(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--max-frames") {
-      max_frames = std::stoull(value());
+    if (a == "-h" || a == "--help") {
+      std::printf("%s", kUsage);
+      return 0;
+    } else if (a == "--max-frames") {
+      max_frames = parse::ParseInteger<uint64_t>(a, value());
     } else if (a == "--fps") {
-      options.fps = std::stod(value());
+      options.fps = parse::ParsePositiveDouble(a, value());
     } else if (a.starts_with("--")) {
       throw UsageError("unknown option '" + a + "'");
     } else {

@@ -48,17 +48,20 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <opencv2/rgbd.hpp>
 #include <opencv2/rgbd/volume.hpp>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "probeless/dataset/datasets.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/parse/number.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
 #include "probeless/sim/scenario.h"
@@ -72,6 +75,39 @@ class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+constexpr const char* kUsage =
+    "usage: fusion_eval --sevenscenes DIR | --tum DIR | --sim SCENARIO --json OUT [options]\n"
+    "  --frames A-B            frame range (0-based, inclusive)\n"
+    "  --peer opencv           also run OpenCV kinfu + ICPOdometry on --peer-frames N (100)\n"
+    "  --mesh OUT.ply          write the volume's mesh\n"
+    "  --poses OUT.txt         write estimated and true poses per frame\n"
+    "  --threads N             worker threads\n"
+    "  --no-merge              skip the depth merge\n"
+    "  --verbose               per-frame lines\n"
+    "  --volume-size M --volume-origin X,Y,Z [--volume-resolution N]\n"
+    "  --min-inliers F         tracking-quality inlier fraction threshold\n"
+    "environment knobs (experiments): FUSION_EVAL_ICP=a,b,c, FUSION_EVAL_TRACK_LEVEL,\n"
+    "  FUSION_EVAL_MAXDIST, FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC, FUSION_EVAL_BILATERAL,\n"
+    "  FUSION_EVAL_ANGLE, FUSION_EVAL_MERGE_GATE, FUSION_EVAL_MERGE_MAJORITY (0|1),\n"
+    "  FUSION_EVAL_MERGE_SIGMAS, FUSION_EVAL_MERGE_QUANT, FUSION_EVAL_DEPTH_SCALE,\n"
+    "  FUSION_EVAL_DEPTH_MAX, FUSION_EVAL_FOCAL, FUSION_EVAL_K1=k1[,k2], FUSION_EVAL_NORMALS,\n"
+    "  FUSION_EVAL_OBSERVABILITY=good,soft,hard, FUSION_EVAL_NORMAL_BLOCK\n"
+    "exit code: 0 done, 2 bad options or input, 1 otherwise\n";
+
+// An environment knob as a number (parse::ParseDouble / ParseInteger; a malformed value is an
+// error naming the variable, never a silent 0).
+std::optional<double> KnobDouble(const char* name,
+                                 double min = std::numeric_limits<double>::lowest()) {
+  const char* text = std::getenv(name);
+  if (!text) return std::nullopt;
+  return parse::ParseDouble(name, text, min);
+}
+std::optional<int> KnobInt(const char* name, int min, int max = std::numeric_limits<int>::max()) {
+  const char* text = std::getenv(name);
+  if (!text) return std::nullopt;
+  return parse::ParseInteger<int>(name, text, min, max);
+}
 
 struct Frame {
   recon::DepthImage depth;
@@ -95,15 +131,12 @@ double Median(std::vector<double> v) {
 // FUSION_EVAL_MERGE_GATE=0 / FUSION_EVAL_MERGE_MAJORITY=0 switch the merge's two deviations from
 // the paper off (recon::MergeOptions::depth_gated_medians / volume_needs_majority).
 void ApplyMergeKnobs(recon::MergeOptions& merge) {
-  if (const char* g = std::getenv("FUSION_EVAL_MERGE_GATE"))
-    merge.depth_gated_medians = std::atoi(g);
-  if (const char* m = std::getenv("FUSION_EVAL_MERGE_MAJORITY")) {
-    merge.volume_needs_majority = std::atoi(m);
+  if (const auto g = KnobInt("FUSION_EVAL_MERGE_GATE", 0, 1)) merge.depth_gated_medians = *g;
+  if (const auto m = KnobInt("FUSION_EVAL_MERGE_MAJORITY", 0, 1)) {
+    merge.volume_needs_majority = *m;
   }
-  if (const char* k = std::getenv("FUSION_EVAL_MERGE_SIGMAS")) merge.lambda_d_sigmas = std::atof(k);
-  if (const char* q = std::getenv("FUSION_EVAL_MERGE_QUANT")) {
-    merge.noise_quantisation_per_m = std::atof(q);
-  }
+  if (const auto k = KnobDouble("FUSION_EVAL_MERGE_SIGMAS", 0)) merge.lambda_d_sigmas = *k;
+  if (const auto q = KnobDouble("FUSION_EVAL_MERGE_QUANT", 0)) merge.noise_quantisation_per_m = *q;
 }
 
 struct Ate {
@@ -312,12 +345,14 @@ PeerResult RunOpenCvPeer(const std::vector<Frame>& frames, const recon::Intrinsi
 
 std::pair<int, int> ParseRange(const std::string& text) {
   const size_t dash = text.find('-');
-  try {
-    if (dash == std::string::npos) throw std::invalid_argument(text);
-    return {std::stoi(text.substr(0, dash)), std::stoi(text.substr(dash + 1))};
-  } catch (const std::exception&) {
-    throw UsageError("--frames expects A-B (0-based, inclusive), got '" + text + "'");
+  const std::string_view all(text);
+  const auto a = parse::TryParseInteger<int>(all.substr(0, dash), 0);
+  const auto b = dash == std::string::npos ? std::nullopt
+                                           : parse::TryParseInteger<int>(all.substr(dash + 1), 0);
+  if (!a || !b || *b < *a) {
+    throw UsageError("--frames expects A-B (0-based, inclusive, A <= B), got '" + text + "'");
   }
+  return {*a, *b};
 }
 
 std::string Json(const std::vector<std::pair<std::string, double>>& fields) {
@@ -361,18 +396,17 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
                    const std::string& poses_out) {
   recon::Intrinsics k;
   std::vector<Frame> frames = LoadSevenScenes(dir, range.first, range.second, &k);
-  if (const char* sc = std::getenv("FUSION_EVAL_DEPTH_SCALE")) {
-    const float f = std::atof(sc);
+  if (const auto sc = KnobDouble("FUSION_EVAL_DEPTH_SCALE", 0)) {
+    const float f = static_cast<float>(*sc);
     for (Frame& fr : frames)
       for (float& d : fr.depth.data) d *= f;
   }
   if (frames.empty()) throw UsageError("no frames in '" + dir + "'");
-  if (const char* fo = std::getenv("FUSION_EVAL_FOCAL")) k.fx = k.fy = std::atof(fo);
+  if (const auto fo = KnobDouble("FUSION_EVAL_FOCAL", 1e-6)) k.fx = k.fy = static_cast<float>(*fo);
   if (const char* kd = std::getenv("FUSION_EVAL_K1")) {  // experiment: radial undistortion k1[,k2]
-    float k1 = 0, k2 = 0;
-    if (std::sscanf(kd, "%f,%f", &k1, &k2) < 1) {
-      throw UsageError("FUSION_EVAL_K1 must be k1[,k2], got '" + std::string(kd) + "'");
-    }
+    const std::vector<double> ks = parse::ParseDoubleList("FUSION_EVAL_K1", kd, 1, 2);
+    const float k1 = static_cast<float>(ks[0]);
+    const float k2 = ks.size() > 1 ? static_cast<float>(ks[1]) : 0.0f;
     for (Frame& fr : frames) {
       recon::DepthImage out;
       out.Resize(fr.depth.width, fr.depth.height);
@@ -390,8 +424,8 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       fr.depth = std::move(out);
     }
   }
-  if (const char* dm = std::getenv("FUSION_EVAL_DEPTH_MAX")) {
-    const float m = std::atof(dm);
+  if (const auto dm = KnobDouble("FUSION_EVAL_DEPTH_MAX", 0)) {
+    const float m = static_cast<float>(*dm);
     for (Frame& fr : frames)
       for (float& d : fr.depth.data)
         if (d > m) d = 0;
@@ -403,33 +437,30 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   if (volume) options.volume = *volume;
   if (min_inliers >= 0) options.icp.min_inlier_fraction = min_inliers;
   if (const char* it = std::getenv("FUSION_EVAL_ICP")) {
-    int a, b, c;
-    if (std::sscanf(it, "%d,%d,%d", &a, &b, &c) == 3) options.icp.iterations = {a, b, c};
+    // Was silently ignored unless exactly three integers.
+    const std::vector<int> n = parse::ParseIntegerList<int>("FUSION_EVAL_ICP", it, 3, 3, 0);
+    options.icp.iterations = {n[0], n[1], n[2]};
   }
-  if (const char* br = std::getenv("FUSION_EVAL_BILATERAL"))
-    options.preprocess.bilateral_radius = std::atoi(br);
-  if (const char* an = std::getenv("FUSION_EVAL_ANGLE")) options.icp.max_angle_deg = std::atof(an);
-  if (const char* tl = std::getenv("FUSION_EVAL_TRACK_LEVEL")) options.track_level = std::atoi(tl);
-  if (const char* md = std::getenv("FUSION_EVAL_MAXDIST"))
-    options.icp.max_distance_m = std::atof(md);
-  if (const char* mw = std::getenv("FUSION_EVAL_MAXW")) options.volume.max_weight = std::atoi(mw);
-  if (const char* tr = std::getenv("FUSION_EVAL_TRUNC"))
-    options.volume.truncation_m = std::atof(tr);
+  if (const auto br = KnobInt("FUSION_EVAL_BILATERAL", 0)) {
+    options.preprocess.bilateral_radius = *br;
+  }
+  if (const auto an = KnobDouble("FUSION_EVAL_ANGLE", 0)) options.icp.max_angle_deg = *an;
+  if (const auto tl = KnobInt("FUSION_EVAL_TRACK_LEVEL", 0)) options.track_level = *tl;
+  if (const auto md = KnobDouble("FUSION_EVAL_MAXDIST", 0)) options.icp.max_distance_m = *md;
+  if (const auto mw = KnobInt("FUSION_EVAL_MAXW", 1)) options.volume.max_weight = *mw;
+  if (const auto tr = KnobDouble("FUSION_EVAL_TRUNC", 0)) options.volume.truncation_m = *tr;
   if (const char* ns = std::getenv("FUSION_EVAL_NORMALS")) {  // depth | volume (G_r normals)
     options.normal_source =
         std::string(ns) == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
   }
   if (const char* ob = std::getenv("FUSION_EVAL_OBSERVABILITY")) {  // good,soft,hard
     recon::TrackingQualityOptions& q = options.quality;
-    if (std::sscanf(ob, "%f,%f,%f", &q.observability_good, &q.observability_soft,
-                    &q.observability_hard) != 3) {
-      throw UsageError("FUSION_EVAL_OBSERVABILITY must be good,soft,hard, got '" + std::string(ob) +
-                       "'");
-    }
+    const std::vector<double> v = parse::ParseDoubleList("FUSION_EVAL_OBSERVABILITY", ob, 3, 3);
+    q.observability_good = static_cast<float>(v[0]);
+    q.observability_soft = static_cast<float>(v[1]);
+    q.observability_hard = static_cast<float>(v[2]);
   }
-  if (const char* nb = std::getenv("FUSION_EVAL_NORMAL_BLOCK")) {
-    options.volume_normal_block = std::atoi(nb);
-  }
+  if (const auto nb = KnobInt("FUSION_EVAL_NORMAL_BLOCK", 0)) options.volume_normal_block = *nb;
   recon::FusionPipeline pipeline(options);
   const recon::VolumeOptions& vol = pipeline.options().volume;
   std::fprintf(stderr,
@@ -788,7 +819,10 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw UsageError(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--sevenscenes")
+    if (a == "-h" || a == "--help") {
+      std::printf("%s", kUsage);
+      return 0;
+    } else if (a == "--sevenscenes")
       sevenscenes = value();
     else if (a == "--tum")
       sevenscenes = "tum:" + value();
@@ -799,7 +833,7 @@ int Run(int argc, char** argv) {
     else if (a == "--peer")
       peer = value();
     else if (a == "--peer-frames")
-      peer_frames = std::stoi(value());
+      peer_frames = parse::ParseInteger<int>(a, value(), 1);
     else if (a == "--json")
       json = value();
     else if (a == "--mesh")
@@ -807,22 +841,20 @@ int Run(int argc, char** argv) {
     else if (a == "--poses")
       poses_out = value();
     else if (a == "--threads")
-      threads = std::stoi(value());
+      threads = parse::ParseInteger<int>(a, value(), 0);
     else if (a == "--no-merge")
       merge = false;
     else if (a == "--verbose")
       verbose = true;
     else if (a == "--volume-size")
-      volume_size = std::stof(value()), volume_given = true;
+      volume_size = static_cast<float>(parse::ParsePositiveDouble(a, value())), volume_given = true;
     else if (a == "--volume-resolution")
-      volume_resolution = std::stoi(value()), volume_given = true;
+      volume_resolution = parse::ParseInteger<int>(a, value(), 1), volume_given = true;
     else if (a == "--min-inliers")
-      min_inliers = std::stof(value());
+      min_inliers = parse::ParseFloat(a, value(), 0, 1);
     else if (a == "--volume-origin") {
-      const std::string v = value();
-      if (std::sscanf(v.c_str(), "%f,%f,%f", &origin.x, &origin.y, &origin.z) != 3) {
-        throw UsageError("--volume-origin expects X,Y,Z");
-      }
+      const std::vector<double> v = parse::ParseDoubleList(a, value(), 3, 3);
+      origin = {static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2])};
       volume_given = true;
     } else
       throw UsageError("unknown option '" + a + "'");
@@ -858,6 +890,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
     return 2;
   } catch (const probeless::recon::ReconError& e) {
+    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
+    return 2;
+  } catch (const probeless::parse::NumberError& e) {
     std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
     return 2;
   } catch (const std::exception& e) {

@@ -15,6 +15,7 @@
 #include "commands.h"
 #include "probeless/log/mcap.h"
 #include "probeless/log/mcap_reader.h"
+#include "probeless/parse/number.h"
 #include "probeless/replay/sources.h"
 
 namespace probeless::tools {
@@ -157,15 +158,15 @@ int Convert(int argc, char** argv) {
       } else if (a == "--compression") {
         writer_options.compression = log::ParseCompressionOption(value());
       } else if (a == "--chunk-size") {
-        writer_options.chunk_size = std::stoull(value());
+        writer_options.chunk_size = parse::ParseInteger<uint64_t>(a, value(), 1);
       } else if (a == "--fps") {
-        dataset_options.fps = std::stod(value());
+        dataset_options.fps = parse::ParsePositiveDouble(a, value());
       } else if (a == "--camera-info") {
         dataset_options.camera_info_path = value();
       } else if (a == "--prefix") {
         dataset_options.topic_prefix = value();
       } else if (a == "--max-frames") {
-        dataset_options.max_frames = std::stoull(value());
+        dataset_options.max_frames = parse::ParseInteger<uint64_t>(a, value());
       } else if (a.starts_with("--")) {
         return BagUsageError("convert: unknown option '" + a + "'");
       } else {

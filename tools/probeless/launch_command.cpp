@@ -14,6 +14,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/launch/launch.h"
 #include "probeless/launch/supervisor.h"
+#include "probeless/parse/number.h"
 
 namespace probeless::tools {
 namespace {
@@ -43,14 +44,9 @@ int UsageError(const std::string& message) {
 
 // Parses a timeout in seconds (finite, >= 0).
 bool ParseSeconds(const std::string& text, double* seconds) {
-  char* end = nullptr;
-  errno = 0;
-  const double value = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0' || errno != 0 || !std::isfinite(value) || value < 0) {
-    return false;
-  }
-  *seconds = value;
-  return true;
+  const auto value = parse::TryParseDouble(text, 0);
+  if (value) *seconds = *value;
+  return value.has_value();
 }
 
 // Directory of the running executable (build/bin), searched first for node executables.

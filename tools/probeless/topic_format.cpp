@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "probeless/msgs/msgs.h"
+#include "probeless/parse/number.h"
 
 namespace probeless::tools {
 
@@ -53,26 +54,22 @@ ParsedArgs ParseArgs(std::span<const std::string> args, std::span<const OptionSp
 }
 
 uint64_t ParseCount(std::string_view option, std::string_view text) {
-  uint64_t value = 0;
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, value);
-  if (text.empty() || ec != std::errc() || ptr != end || value == 0 ||
-      value > static_cast<uint64_t>(std::numeric_limits<int64_t>::max())) {
+  // Up to int64's maximum: the counts are compared with the bus's signed counters.
+  const auto value = parse::TryParseInteger<int64_t>(text, 1);
+  if (!value) {
     throw UsageError(std::string(option) + " expects a positive integer, got '" +
                      std::string(text) + "'");
   }
-  return value;
+  return static_cast<uint64_t>(*value);
 }
 
 double ParseSeconds(std::string_view option, std::string_view text) {
-  double value = 0;
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, value, std::chars_format::fixed);
-  if (text.empty() || ec != std::errc() || ptr != end || !std::isfinite(value) || value < 0) {
+  const auto value = parse::TryParseDouble(text, 0);
+  if (!value) {
     throw UsageError(std::string(option) + " expects a non-negative number of seconds, got '" +
                      std::string(text) + "'");
   }
-  return value;
+  return *value;
 }
 
 // --- Formatting --------------------------------------------------------------------------------
@@ -275,7 +272,11 @@ std::optional<std::string> DescribeMessage(const bus::TopicType& type,
   attempt(Try<ShLight>(
       type, bytes,
       [](const ShLight& m) {
+        const std::string_view units = ShLightUnitsName(m.units);
         return DescribeHeader(m.header) + "sh_light: bands " + std::to_string(m.bands) +
+               ", units " +
+               (units.empty() ? std::to_string(static_cast<uint32_t>(m.units))
+                              : std::string(units)) +
                ", dominant direction " +
                Triple(m.dominant_direction[0], m.dominant_direction[1], m.dominant_direction[2]) +
                ", intensity " + Number(m.intensity) + ", confidence " + Number(m.confidence) + "\n";

@@ -134,6 +134,29 @@ void ThrowUnsigned(std::string_view name, std::string_view text, uint64_t min, u
   Throw(name, what, text);
 }
 
+std::vector<std::string_view> SplitList(std::string_view name, std::string_view text,
+                                        size_t min_count, size_t max_count) {
+  std::vector<std::string_view> items;
+  size_t start = 0;
+  while (true) {
+    const size_t comma = text.find(',', start);
+    items.push_back(text.substr(start, comma == std::string_view::npos ? comma : comma - start));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  if (items.size() < min_count || items.size() > max_count) {
+    const std::string count = min_count == max_count
+                                  ? std::to_string(min_count)
+                                  : std::to_string(min_count) + " to " + std::to_string(max_count);
+    Throw(name, count + " comma-separated numbers", text);
+  }
+  return items;
+}
+
+std::string ItemName(std::string_view name, size_t index) {
+  return std::string(name) + " item " + std::to_string(index + 1);
+}
+
 }  // namespace internal
 
 std::optional<double> TryParseDouble(std::string_view text, double min, double max) {
@@ -174,6 +197,16 @@ float ParseFloat(std::string_view name, std::string_view text, float min, float 
         DescribeRealRange(min, max, std::numeric_limits<float>::lowest(),
                           std::numeric_limits<float>::max()),
         text);
+}
+
+std::vector<double> ParseDoubleList(std::string_view name, std::string_view text, size_t min_count,
+                                    size_t max_count, double min, double max) {
+  std::vector<double> out;
+  const std::vector<std::string_view> items = internal::SplitList(name, text, min_count, max_count);
+  for (size_t i = 0; i < items.size(); ++i) {
+    out.push_back(ParseDouble(internal::ItemName(name, i), items[i], min, max));
+  }
+  return out;
 }
 
 }  // namespace probeless::parse

@@ -19,6 +19,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace probeless::parse {
 
@@ -41,6 +42,10 @@ std::optional<uint64_t> ParseUnsigned(std::string_view text, uint64_t min, uint6
                               int64_t max, int64_t type_min, int64_t type_max);
 [[noreturn]] void ThrowUnsigned(std::string_view name, std::string_view text, uint64_t min,
                                 uint64_t max, uint64_t type_max);
+// The items of a comma-separated list, checked for their count (see ParseDoubleList).
+std::vector<std::string_view> SplitList(std::string_view name, std::string_view text,
+                                        size_t min_count, size_t max_count);
+std::string ItemName(std::string_view name, size_t index);
 }  // namespace internal
 
 // `text` as an integer of type T in [min, max] (defaults: T's whole range), or nothing when it
@@ -98,5 +103,28 @@ double ParsePositiveDouble(std::string_view name, std::string_view text);
 float ParseFloat(std::string_view name, std::string_view text,
                  float min = std::numeric_limits<float>::lowest(),
                  float max = std::numeric_limits<float>::max());
+
+// `text` as comma-separated reals ("X,Y,Z"), between min_count and max_count of them, each in
+// [min, max]. Throws NumberError "<name> expects 3 comma-separated numbers, got '1,2'" (or "1 to 2
+// comma-separated numbers") for a wrong count, and ParseDouble's message for a bad item, named
+// "<name> item <i>" (1-based): "--volume-origin item 2 expects a number, got 'y'".
+std::vector<double> ParseDoubleList(std::string_view name, std::string_view text, size_t min_count,
+                                    size_t max_count,
+                                    double min = std::numeric_limits<double>::lowest(),
+                                    double max = std::numeric_limits<double>::max());
+
+// ParseDoubleList for integers of type T (each item as ParseInteger<T>(item name, item, min,
+// max)): "FUSION_EVAL_ICP item 3 expects a positive integer, got '-4'".
+template <std::integral T>
+std::vector<T> ParseIntegerList(std::string_view name, std::string_view text, size_t min_count,
+                                size_t max_count, T min = std::numeric_limits<T>::min(),
+                                T max = std::numeric_limits<T>::max()) {
+  std::vector<T> out;
+  const std::vector<std::string_view> items = internal::SplitList(name, text, min_count, max_count);
+  for (size_t i = 0; i < items.size(); ++i) {
+    out.push_back(ParseInteger<T>(internal::ItemName(name, i), items[i], min, max));
+  }
+  return out;
+}
 
 }  // namespace probeless::parse
