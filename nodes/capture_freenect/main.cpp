@@ -9,8 +9,10 @@
 // max_frames, 1 on a device error, 2 on bad arguments.
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 #include "probeless/capture/capture_node.h"
+#include "probeless/parse/number.h"
 
 int main(int argc, char** argv) {
   using namespace probeless;
@@ -18,6 +20,12 @@ int main(int argc, char** argv) {
     node::Node node(argc, argv, "capture_freenect");
     capture::FreenectOptions options;
     options.device = node.Param("device", "");
+    // An all-digit device is libfreenect's int index: checked here so that a 20-digit one is bad
+    // input (exit 2) before any USB access; OpenFreenect checks it again for other callers.
+    if (!options.device.empty() &&
+        options.device.find_first_not_of("0123456789") == std::string::npos) {
+      parse::ParseInteger<int>("param device", options.device, 0);
+    }
     options.depth_mode = node.Param("depth_mode", "registered");
     options.colour = node.Param("colour", true);
     options.depth = node.Param("depth", true);
@@ -26,6 +34,9 @@ int main(int argc, char** argv) {
     auto log = [&node](const std::string& line) { node.Warn() << line; };
     return capture::RunCaptureNode(node, [&] { return capture::OpenFreenect(options, log); });
   } catch (const node::NodeError& e) {
+    std::fprintf(stderr, "[error] [capture_freenect] %s\n", e.what());
+    return 2;
+  } catch (const parse::NumberError& e) {
     std::fprintf(stderr, "[error] [capture_freenect] %s\n", e.what());
     return 2;
   } catch (const std::exception& e) {

@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "probeless/node/node.h"
+#include "probeless/parse/number.h"
 #include "probeless/replay/player.h"
 #include "probeless/replay/sources.h"
 
@@ -55,7 +56,7 @@ std::vector<int> ParseSubjects(const std::string& text) {
   std::vector<int> subjects;
   std::stringstream in(text);
   for (std::string item; std::getline(in, item, ',');) {
-    subjects.push_back(static_cast<int>(node::ParseNumberOption("--subjects", item)));
+    subjects.push_back(parse::ParseInteger<int>("--subjects", item, 1));
   }
   return subjects;
 }
@@ -185,17 +186,17 @@ int Run(int argc, char** argv) {
     } else if (a == "--delay") {
       delay_s = node::ParseNumberOption(a, value());
     } else if (a == "--fps") {
-      dataset_options.fps = node::ParseNumberOption(a, value());
+      dataset_options.fps = parse::ParsePositiveDouble(a, value());
     } else if (a == "--camera-info") {
       dataset_options.camera_info_path = value();
     } else if (a == "--prefix") {
       dataset_options.topic_prefix = value();
     } else if (a == "--max-frames") {
-      dataset_options.max_frames = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      dataset_options.max_frames = parse::ParseInteger<uint64_t>(a, value());
     } else if (a == "--subjects") {
       dataset_options.yaleb_subjects = ParseSubjects(value());
     } else if (a == "--slots") {
-      options.slot_count = static_cast<uint32_t>(node::ParseNumberOption(a, value()));
+      options.slot_count = parse::ParseInteger<uint32_t>(a, value(), 1);
     } else if (a == "--no-keyboard") {
       keyboard = false;
     } else if (a.starts_with("--")) {

@@ -31,6 +31,7 @@
 
 #include "probeless/log/mcap.h"
 #include "probeless/node/node.h"
+#include "probeless/parse/number.h"
 #include "probeless/record/recorder.h"
 
 namespace {
@@ -64,12 +65,11 @@ struct Settings {
 };
 
 double ParseNumber(const std::string& option, const std::string& text) {
-  double value = 0;
-  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (ec != std::errc() || end != text.data() + text.size() || text.empty()) {
-    throw UsageError("option " + option + ": '" + text + "' is not a number");
-  }
-  return value;
+  // parse::'s rules (whole text, finite: from_chars alone took "inf"); ranges are checked with the
+  // params' values in MakeOptions.
+  const auto value = probeless::parse::TryParseDouble(text);
+  if (!value) throw UsageError("option " + option + ": '" + text + "' is not a number");
+  return *value;
 }
 
 // Returns false if --help was given.
@@ -105,11 +105,10 @@ bool ParseCommandLine(const std::vector<std::string>& args, Settings& s) {
     } else if (arg == "--split-duration-s") {
       s.split_duration_s = ParseNumber(arg, next());
     } else if (arg == "--queue-depth") {
-      const double depth = ParseNumber(arg, next());
-      if (depth != static_cast<double>(static_cast<int64_t>(depth))) {
-        throw UsageError("option --queue-depth: '" + args[i] + "' is not an integer");
-      }
-      s.queue_depth = static_cast<int64_t>(depth);
+      const std::string text = next();
+      const auto depth = probeless::parse::TryParseInteger<int64_t>(text);
+      if (!depth) throw UsageError("option --queue-depth: '" + text + "' is not an integer");
+      s.queue_depth = *depth;
     } else if (arg == "--chunk-size-mb") {
       s.chunk_size_mb = ParseNumber(arg, next());
     } else if (arg.size() > 1 && arg[0] == '-') {

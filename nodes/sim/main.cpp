@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "probeless/node/node.h"
+#include "probeless/parse/number.h"
 #include "probeless/replay/player.h"
 #include "probeless/replay/sources.h"
 #include "probeless/sim/generate.h"
@@ -218,9 +219,9 @@ int Run(int argc, char** argv) {
     } else if (a == "--preview") {
       preview = value();
     } else if (a == "--frames") {
-      options.max_frames = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      options.max_frames = parse::ParseInteger<uint64_t>(a, value());
     } else if (a == "--threads") {
-      options.threads = static_cast<int>(node::ParseNumberOption(a, value()));
+      options.threads = parse::ParseInteger<int>(a, value(), 0);
     } else if (a == "--rate") {
       player_options.rate = node::ParseNumberOption(a, value());
     } else if (a == "--fast") {
@@ -236,19 +237,19 @@ int Run(int argc, char** argv) {
     } else if (a == "--no-clock") {
       player_options.clock_topic.clear();
     } else if (a == "--generate") {
-      generate_count = static_cast<int>(node::ParseNumberOption(a, value()));
+      generate_count = parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--split") {
       split = value();
     } else if (a == "--spp") {
-      generate.samples_per_pixel = static_cast<int>(node::ParseNumberOption(a, value()));
+      generate.samples_per_pixel = parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--bounces") {
-      generate.bounces = static_cast<int>(node::ParseNumberOption(a, value()));
+      generate.bounces = parse::ParseInteger<int>(a, value(), 0);
     } else if (a == "--resume") {
       resume = true;
     } else if (a == "--yaleb-style") {
       yaleb_out = value();
     } else if (a == "--subjects") {
-      yaleb.subjects = static_cast<int>(node::ParseNumberOption(a, value()));
+      yaleb.subjects = parse::ParseInteger<int>(a, value(), 1);
       yaleb_option_seen = true;
     } else if (a == "--size") {
       const std::string size = value();
@@ -265,7 +266,7 @@ int Run(int argc, char** argv) {
     } else if (a == "--behind") {
       yaleb.behind = yaleb_option_seen = true;
     } else if (a == "--seed") {
-      yaleb.seed = generate_seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      yaleb.seed = generate_seed = parse::ParseInteger<uint64_t>(a, value());
       yaleb_option_seen = true;
     } else if (a == "--mesh") {
       yaleb.mesh = value();

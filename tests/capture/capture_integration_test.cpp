@@ -304,6 +304,12 @@ TEST_F(CaptureIntegrationTest, NodesWithoutTheirDeviceFailWithOneLine) {
   EXPECT_TRUE(r.err.find("libfreenect finds no Kinect v1") != std::string::npos ||
               r.err.find("libfreenect could not initialise libusb") != std::string::npos)
       << r.err;
+  // A device index beyond int (issue #22: was an uncaught std::out_of_range from stoi): bad input.
+  r = Run(kBin + "/capture_freenect --ros-args -p \"device:='99999999999999999999'\"");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(r.err,
+            "[error] [capture_freenect] param device expects a non-negative integer up to "
+            "2147483647, got '99999999999999999999'\n");
   r = Run(kBin + "/capture_libcamera --ros-args -p camera_id:=imx219");
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("[error] [/capture_libcamera] libcamera camera 'imx219' not found"),

@@ -4,10 +4,13 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <optional>
 #include <vector>
 
 #include "probeless/capture/capture_error.h"
 #include "probeless/capture/device.h"
+#include "probeless/parse/number.h"
 
 namespace probeless::capture {
 
@@ -19,6 +22,19 @@ class FreenectDevice final : public Device {
  public:
   FreenectDevice(const FreenectOptions& options,
                  const std::function<void(const std::string&)>& log) {
+    // An all-digit device is an index; checked before libfreenect starts, so a 20-digit index is
+    // bad input (never retried), not an uncaught std::out_of_range from stoi.
+    const bool digits_only = options.device.empty() ||
+                             options.device.find_first_not_of("0123456789") == std::string::npos;
+    const std::optional<int> index = options.device.empty()
+                                         ? std::optional<int>(0)
+                                         : parse::TryParseInteger<int>(options.device, 0);
+    if (digits_only && !index) {
+      throw CaptureError(ErrorKind::kBadInput,
+                         "param device expects a Kinect index (a non-negative integer up to " +
+                             std::to_string(std::numeric_limits<int>::max()) +
+                             ") or a serial, got '" + options.device + "'");
+    }
     if (freenect_init(&context_, nullptr) < 0 || context_ == nullptr) {
       throw CaptureError(ErrorKind::kDeviceError,
                          "libfreenect could not initialise libusb: check that /dev/bus/usb is "
@@ -31,8 +47,7 @@ class FreenectDevice final : public Device {
             FREENECT_DEVICE_CAMERA |
             ((std::isnan(options.tilt_deg) && options.led < 0) ? 0 : FREENECT_DEVICE_MOTOR)));
     const int count = freenect_num_devices(context_);
-    const bool by_index = options.device.empty() ||
-                          options.device.find_first_not_of("0123456789") == std::string::npos;
+    const bool by_index = digits_only;
     description_ = by_index ? "Kinect v1 #" + (options.device.empty() ? "0" : options.device)
                             : "Kinect v1 with serial '" + options.device + "'";
     if (count <= 0) {
@@ -44,15 +59,14 @@ class FreenectDevice final : public Device {
     }
     int rc = 0;
     if (by_index) {
-      const int index = options.device.empty() ? 0 : std::stoi(options.device);
-      if (index >= count) {
+      if (*index >= count) {
         Close();
         throw CaptureError(ErrorKind::kNoDevice,
                            description_ + " does not exist: libfreenect sees " +
                                std::to_string(count) + " Kinect(s); pick param device 0.." +
                                std::to_string(count - 1));
       }
-      rc = freenect_open_device(context_, &device_, index);
+      rc = freenect_open_device(context_, &device_, *index);
     } else {
       rc = freenect_open_device_by_camera_serial(context_, &device_, options.device.c_str());
     }

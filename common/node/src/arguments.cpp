@@ -7,6 +7,7 @@
 #include "names.h"
 #include "probeless/node/main.h"
 #include "probeless/node/node.h"
+#include "probeless/parse/number.h"
 
 namespace probeless::node::internal {
 namespace {
@@ -152,14 +153,10 @@ ParsedArguments ParseArguments(const std::vector<std::string>& argv) {
 namespace probeless::node {
 
 double ParseNumberOption(std::string_view option, std::string_view text) {
-  const std::string copy(text);
-  try {
-    size_t used = 0;
-    const double value = std::stod(copy, &used);
-    if (used == copy.size() && std::isfinite(value)) return value;
-  } catch (const std::exception&) {
-  }
-  throw UsageError(std::string(option) + " expects a number, got '" + copy + "'");
+  // parse::'s rules (whole text, finite); the message is parse::ParseDouble's, the error type
+  // stays UsageError for the callers that catch it.
+  if (const auto value = parse::TryParseDouble(text)) return *value;
+  throw UsageError(std::string(option) + " expects a number, got '" + std::string(text) + "'");
 }
 
 }  // namespace probeless::node

@@ -26,7 +26,9 @@ class UsageError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// `text` as a finite number; throws UsageError "<option> expects a number, got '<text>'".
+// `text` as a finite number (parse::TryParseDouble's rules); throws UsageError
+// "<option> expects a number, got '<text>'". Integer options use parse::ParseInteger (its
+// NumberError is an invalid_argument: exit 2 through RunMain too).
 double ParseNumberOption(std::string_view option, std::string_view text);
 
 template <class... BadInput, class Body>
