@@ -120,6 +120,46 @@ TEST_F(MeshFiles, PlyErrors) {
                                       "0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
   EXPECT_EQ(ErrorOf([&] { LoadPly(bad_index); }),
             bad_index + ": element face: face 0 uses vertex 5 of 3");
+  // Face indices must be integers (a float or a NaN was cast), counts must fit the file.
+  const std::string float_index =
+      Write("f.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+            "property float y\nproperty float z\nelement face 1\n"
+            "property list uchar float vertex_indices\nend_header\n"
+            "0 0 0\n1 0 0\n0 1 0\n3 0 1 1.5\n");
+  EXPECT_EQ(ErrorOf([&] { LoadPly(float_index); }),
+            float_index +
+                ": element face: face 0 vertex index must be a non-negative integer, got "
+                "1.5");
+  const std::string negative_count =
+      Write("g.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
+            "property float y\nproperty float z\nelement face 1\n"
+            "property list int int vertex_indices\nend_header\n"
+            "0 0 0\n1 0 0\n0 1 0\n-3 0 1 2\n");
+  EXPECT_EQ(ErrorOf([&] { LoadPly(negative_count); }),
+            negative_count +
+                ": element face: face 0 vertex count must be a non-negative integer, "
+                "got -3");
+  const std::string huge =
+      Write("h.ply",
+            "ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\n"
+            "property float x\nproperty float y\nproperty float z\nend_header\n"
+            "0123456789ab");
+  EXPECT_EQ(ErrorOf([&] { LoadPly(huge); }),
+            huge +
+                ": element vertex has 1099511627776 entries of at least 12 bytes, but the file "
+                "has 12 bytes after the header (truncated or a wrong count)");
+  const std::string empty_element = Write("i.ply",
+                                          "ply\nformat binary_little_endian 1.0\nelement junk "
+                                          "4611686018427387904\nend_header\n");
+  EXPECT_EQ(ErrorOf([&] { LoadPly(empty_element); }),
+            empty_element + ": element junk has 4611686018427387904 entries but no properties");
+  const std::string nan_vertex = Write("j.ply",
+                                       "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+                                       "property float y\nproperty float z\nend_header\nnan 0 0\n");
+  EXPECT_EQ(ErrorOf([&] { LoadPly(nan_vertex); }),
+            nan_vertex + ": element vertex: expected a number, got 'nan'");
   const std::string truncated = Write("d.ply",
                                       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                       "property float y\nproperty float z\nend_header\n0 0 0\n1 0");

@@ -4,13 +4,16 @@
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
 #include <sstream>
 #include <tuple>
 
+#include "probeless/parse/number.h"
 #include "probeless/raytrace/mesh.h"
 #include "probeless/raytrace/render.h"
 
@@ -22,20 +25,18 @@ std::string Lower(std::string s) {
   return s;
 }
 
+// The project's number rules (probeless/parse/number.h): whole token, finite, in range.
 bool ParseFloat(std::string_view text, float& out) {
-  const char* begin = text.data();
-  const char* end = text.data() + text.size();
-  if (begin != end && *begin == '+') ++begin;
-  const auto result = std::from_chars(begin, end, out);
-  return result.ec == std::errc() && result.ptr == end && std::isfinite(out);
+  const auto value = parse::TryParseDouble(text, std::numeric_limits<float>::lowest(),
+                                           std::numeric_limits<float>::max());
+  if (value) out = static_cast<float>(*value);
+  return value.has_value();
 }
 
 bool ParseInt(std::string_view text, long long& out) {
-  const char* begin = text.data();
-  const char* end = text.data() + text.size();
-  if (begin != end && *begin == '+') ++begin;
-  const auto result = std::from_chars(begin, end, out);
-  return result.ec == std::errc() && result.ptr == end;
+  const auto value = parse::TryParseInteger<long long>(text);
+  if (value) out = *value;
+  return value.has_value();
 }
 
 std::vector<std::string_view> SplitWhitespace(std::string_view line) {
@@ -217,12 +218,9 @@ class PlyReader {
     if (format_ == PlyFormat::kAscii) {
       std::string token;
       if (!(in_ >> token)) Fail(element, "unexpected end of file");
-      char* end = nullptr;
-      const double value = std::strtod(token.c_str(), &end);
-      if (end == token.c_str() || *end != '\0') {
-        Fail(element, "expected a number, got '" + token + "'");
-      }
-      return value;
+      const auto value = parse::TryParseDouble(token);
+      if (!value) Fail(element, "expected a number, got '" + token + "'");
+      return *value;
     }
     const size_t size = PlyTypeSize(type);
     unsigned char bytes[8];
@@ -244,6 +242,19 @@ class PlyReader {
     if (type == "uint" || type == "uint32") return as(uint32_t{});
     if (type == "float" || type == "float32") return as(float{});
     return as(double{});
+  }
+
+  // A list count or a vertex index: a non-negative integer below 2^32 whatever the property's
+  // type (a float 1.5 or a NaN from a binary file was cast to an index before, issue #22).
+  uint32_t ReadIndex(const std::string& type, const std::string& element, const std::string& what) {
+    const double value = Read(type, element);
+    if (!(value >= 0 && value <= std::numeric_limits<uint32_t>::max()) ||
+        value != std::floor(value)) {
+      char text[32];
+      std::snprintf(text, sizeof(text), "%.17g", value);
+      Fail(element, what + " must be a non-negative integer, got " + text);
+    }
+    return static_cast<uint32_t>(value);
   }
 
   [[noreturn]] void Fail(const std::string& element, const std::string& what) {
@@ -326,6 +337,32 @@ Mesh LoadPly(const std::string& path) {
   }
   if (!ended) fail("missing 'end_header'");
   if (!format) throw RaytraceError(path + ": PLY header has no 'format' line");
+  // Header counts against the body's size before anything is read or allocated: each entry takes
+  // at least one byte per scalar (one digit per token in ASCII), so a 100-byte file cannot ask for
+  // 2^40 vertices, and an element without properties (which would read nothing per entry) must be
+  // empty.
+  const std::streampos body_start = in.tellg();
+  in.seekg(0, std::ios::end);
+  const uint64_t body_bytes = static_cast<uint64_t>(in.tellg() - body_start);
+  in.seekg(body_start);
+  for (const PlyElement& e : elements) {
+    uint64_t min_bytes = 0;
+    for (const PlyProperty& p : e.properties) {
+      min_bytes += *format == PlyFormat::kAscii
+                       ? 1
+                       : PlyTypeSize(p.count_type.empty() ? p.type : p.count_type);
+    }
+    if (e.count > 0 && min_bytes == 0) {
+      throw RaytraceError(path + ": element " + e.name + " has " + std::to_string(e.count) +
+                          " entries but no properties");
+    }
+    if (min_bytes > 0 && e.count > body_bytes / min_bytes) {
+      throw RaytraceError(path + ": element " + e.name + " has " + std::to_string(e.count) +
+                          " entries of at least " + std::to_string(min_bytes) +
+                          " bytes, but the file has " + std::to_string(body_bytes) +
+                          " bytes after the header (truncated or a wrong count)");
+    }
+  }
   PlyReader reader(in, *format, path);
   Mesh mesh;
   bool has_vertex = false;
@@ -366,6 +403,11 @@ Mesh LoadPly(const std::string& path) {
           values[k] = reader.Read(e.properties[k].type, "vertex");
         }
         auto get = [&](const std::string& name) { return static_cast<float>(values[index[name]]); };
+        for (const char* axis : {"x", "y", "z"}) {
+          if (!std::isfinite(get(axis))) {
+            reader.Fail("vertex", "vertex " + std::to_string(i) + " has a non-finite " + axis);
+          }
+        }
         mesh.positions.push_back({get("x"), get("y"), get("z")});
         if (has_normals) mesh.normals.push_back(Normalize({get("nx"), get("ny"), get("nz")}));
         if (has_colors) {
@@ -392,20 +434,22 @@ Mesh LoadPly(const std::string& path) {
             reader.Read(p.type, "face");
             continue;
           }
-          const double count = reader.Read(p.count_type, "face");
-          if (count < 0 || count > 1000) {
+          const uint32_t count =
+              reader.ReadIndex(p.count_type, "face", "face " + std::to_string(i) + " vertex count");
+          if (count > 1000) {
             reader.Fail("face", "face " + std::to_string(i) + " has an invalid vertex count " +
                                     std::to_string(count));
           }
           polygon.clear();
-          for (int k = 0; k < static_cast<int>(count); ++k) {
-            const double idx = reader.Read(p.type, "face");
-            if (idx < 0 || idx >= static_cast<double>(mesh.positions.size())) {
+          for (uint32_t k = 0; k < count; ++k) {
+            const uint32_t idx =
+                reader.ReadIndex(p.type, "face", "face " + std::to_string(i) + " vertex index");
+            if (idx >= mesh.positions.size()) {
               reader.Fail("face", "face " + std::to_string(i) + " uses vertex " +
-                                      std::to_string(static_cast<long long>(idx)) + " of " +
+                                      std::to_string(idx) + " of " +
                                       std::to_string(mesh.positions.size()));
             }
-            polygon.push_back(static_cast<uint32_t>(idx));
+            polygon.push_back(idx);
           }
           if (p.name != "vertex_indices" && p.name != "vertex_index") continue;
           if (polygon.size() < 3) {
@@ -422,8 +466,8 @@ Mesh LoadPly(const std::string& path) {
           if (p.count_type.empty()) {
             reader.Read(p.type, e.name);
           } else {
-            const double count = reader.Read(p.count_type, e.name);
-            for (int k = 0; k < static_cast<int>(count); ++k) reader.Read(p.type, e.name);
+            const uint32_t count = reader.ReadIndex(p.count_type, e.name, "list count");
+            for (uint32_t k = 0; k < count; ++k) reader.Read(p.type, e.name);
           }
         }
       }
