@@ -563,6 +563,34 @@ TEST(ShLightTest, IndexingAndValidation) {
             "probeless_msgs/ShLight: bands 0 out of range 1..5");
 }
 
+TEST(ShLightTest, UnitsFieldReplacesTheReservedWord) {
+  // Value-initialised (and every message recorded before the field: its reserved zero) = unknown.
+  ShLight light;
+  EXPECT_EQ(light.units, ShLightUnits::kUnknown);
+  EXPECT_NE(ShLight::LayoutDescription().find(
+                "units:ShLightUnits{unknown=0,linear=1,face_model=2,linear_unscaled=3}:u32@60;"),
+            std::string::npos);
+  EXPECT_EQ(ShLight::LayoutDescription().find("reserved"), std::string::npos);
+  light.bands = 3;
+  for (ShLightUnits u : {ShLightUnits::kUnknown, ShLightUnits::kLinear, ShLightUnits::kFaceModel,
+                         ShLightUnits::kLinearUnscaled}) {
+    light.units = u;
+    EXPECT_NO_THROW(light.Validate());
+    EXPECT_EQ(ShLightUnitsFromName(ShLightUnitsName(u)), u);
+  }
+  light.units = static_cast<ShLightUnits>(4);
+  EXPECT_EQ(ShLightUnitsName(light.units), "");
+  EXPECT_EQ(ErrorOf([&] { light.Validate(); }),
+            "probeless_msgs/ShLight: units 4 is not unknown (0), linear (1), face_model (2) or "
+            "linear_unscaled (3)");
+  EXPECT_EQ(ErrorOf([&] { ShLightUnitsFromName("gamma"); }),
+            "probeless_msgs/ShLight: units 'gamma' is not unknown, linear, face_model or "
+            "linear_unscaled");
+  // The bytes of a pre-field message (reserved0 = 0 at offset 60) read as kUnknown.
+  alignas(64) std::byte bytes[sizeof(ShLight)] = {};
+  EXPECT_EQ(ReadMessage<ShLight>(std::span<const std::byte>(bytes))->units, ShLightUnits::kUnknown);
+}
+
 // --- GeometryBuffer, TransferBuffer --------------------------------------------------------------
 
 TEST(GeometryBufferTest, StandardLayoutPlanesAreAlignedAndDisjoint) {

@@ -417,6 +417,7 @@ MessageBuffer MakeLight() {
   light->dominant_direction[2] = -1;
   light->intensity = 3.5f;
   light->confidence = 0.25f;
+  light->units = m::ShLightUnits::kLinear;
   return buffer;
 }
 
@@ -474,6 +475,29 @@ TEST(ProbelessTypesConversionTest, RoundTripsAreByteExact) {
     ASSERT_EQ(decoded.size(), original.size());
     EXPECT_EQ(std::memcmp(decoded.bytes().data(), original.bytes().data(), original.size()), 0);
   }
+}
+
+TEST(ProbelessTypesConversionTest, ShLightRecordedBeforeTheUnitsFieldDecodesAsUnknown) {
+  const MessageBuffer original = MakeLight();
+  const Ros2Converter& converter = Ros2ConverterFor<m::ShLight>();
+  EXPECT_NE(converter.schema_text().find("uint32 units"), std::string_view::npos);
+  const std::vector<std::byte> cdr = EncodeRos2(converter, original.bytes());
+  // The old encoding: the same bytes without the trailing uint32.
+  const MessageBuffer old = DecodeRos2(converter, std::span(cdr.data(), cdr.size() - 4));
+  const auto light = m::ReadMessage<m::ShLight>(old.bytes());
+  EXPECT_EQ(light->units, m::ShLightUnits::kUnknown);
+  EXPECT_EQ(light->bands, 4u);
+  EXPECT_EQ(light->confidence, 0.25f);
+  EXPECT_EQ(light->coefficients[15][2],
+            m::ReadMessage<m::ShLight>(original.bytes())->coefficients[15][2]);
+  EXPECT_EQ(m::ReadMessage<m::ShLight>(DecodeRos2(converter, cdr).bytes())->units,
+            m::ShLightUnits::kLinear);
+  // A value outside the enum is refused by name.
+  std::vector<std::byte> bad = cdr;
+  bad[bad.size() - 4] = std::byte{9};
+  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, bad); }),
+            "CDR probeless_msgs/msg/ShLight: decoded message invalid: probeless_msgs/ShLight: "
+            "units 9 is not unknown (0), linear (1), face_model (2) or linear_unscaled (3)");
 }
 
 TEST(ProbelessTypesConversionTest, FaceObservationLayout) {
@@ -554,6 +578,8 @@ TEST(Ros2ConvertersTest, EveryTruncatedMessageIsACleanError) {
     const Ros2Converter& converter = Ros2ConverterForType(type);
     const std::vector<std::byte> cdr = EncodeRos2(converter, original.bytes());
     for (size_t cut = 0; cut < cdr.size(); ++cut) {
+      // A light that ends after `confidence` is one recorded before the units field (below).
+      if (type == m::ShLight::kTypeName && cut == cdr.size() - 4) continue;
       const std::string error = ErrorOf([&] { DecodeRos2(converter, std::span(cdr.data(), cut)); });
       ASSERT_EQ(error.rfind("CDR " + std::string(converter.ros2_type()) + ": ", 0), 0u)
           << type << " cut at " << cut << ": " << error;

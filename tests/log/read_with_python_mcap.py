@@ -135,6 +135,7 @@ def check_message(ros, expected, what):
                  what + " dominant_direction")
         check_eq(ros.intensity, f["intensity"], what + " intensity")
         check_eq(ros.confidence, f["confidence"], what + " confidence")
+        check_eq(ros.units, f["units"], what + " units")
     elif kind == "probeless_msgs/GeometryBuffer":
         check_full_header(ros, f["header"], what)
         check_eq([ros.width, ros.height], [f["width"], f["height"]], what + " size")

@@ -188,6 +188,7 @@ std::string MessageJson(std::string_view type, std::span<const std::byte> bytes)
         .Add("dominant_direction", List(std::span<const float>(light->dominant_direction)))
         .Add("intensity", Number(static_cast<double>(light->intensity)))
         .Add("confidence", Number(static_cast<double>(light->confidence)))
+        .Add("units", Number(static_cast<uint32_t>(light->units)))
         .Done();
   }
   if (type == msgs::GeometryBuffer::kTypeName) {
@@ -352,6 +353,7 @@ std::vector<Sample> MakeSamples() {
     light->dominant_direction[1] = -0.8f;
     light->intensity = 2.5f;
     light->confidence = 0.75f;
+    light->units = msgs::ShLightUnits::kLinear;
     add("/light", msgs::ShLight::kTypeName, t0 + 5000, 3, std::move(buffer));
   }
   {

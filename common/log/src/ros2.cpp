@@ -637,8 +637,11 @@ struct ShLightFields {
   float dominant_direction[3] = {};
   float intensity = 0;
   float confidence = 0;
+  m::ShLightUnits units = m::ShLightUnits::kUnknown;
 };
 
+// `units` is the last field, so a message recorded before it (ending after `confidence`) still
+// decodes, as kUnknown (docs/log.md).
 class ShLightConverter : public TypedConverter<m::ShLight, ShLightFields> {
  public:
   ShLightConverter()
@@ -652,7 +655,9 @@ class ShLightConverter : public TypedConverter<m::ShLight, ShLightFields> {
                     "float32[] coefficients          # bands^2 x (R, G, B): index (l*(l+1)+m)*3+c\n"
                     "float32[3] dominant_direction   # unit vector towards the light, or 0\n"
                     "float32 intensity\n"
-                    "float32 confidence              # 0..1\n",
+                    "float32 confidence              # 0..1\n"
+                    "uint32 units                    # 0 unknown (recorded before the field), 1 "
+                    "linear, 2 face_model, 3 linear_unscaled\n",
                 {kStdHeader, kTime})) {}
 
  protected:
@@ -664,6 +669,7 @@ class ShLightConverter : public TypedConverter<m::ShLight, ShLightFields> {
     out.Array(std::span<const float>(light.dominant_direction));
     out.Write<float>(light.intensity);
     out.Write<float>(light.confidence);
+    out.Write<uint32_t>(static_cast<uint32_t>(light.units));
   }
 
   ShLightFields Parse(CdrReader& in) const override {
@@ -683,6 +689,7 @@ class ShLightConverter : public TypedConverter<m::ShLight, ShLightFields> {
     in.Array(std::span<float>(f.dominant_direction), "dominant_direction");
     f.intensity = in.Read<float>("intensity");
     f.confidence = in.Read<float>("confidence");
+    if (in.remaining() > 0) f.units = static_cast<m::ShLightUnits>(in.Read<uint32_t>("units"));
     return f;
   }
 
@@ -695,6 +702,7 @@ class ShLightConverter : public TypedConverter<m::ShLight, ShLightFields> {
               light.dominant_direction);
     light.intensity = f.intensity;
     light.confidence = f.confidence;
+    light.units = f.units;
   }
 
   void Check(const m::ShLight& light, std::span<const std::byte>) const override {

@@ -22,6 +22,50 @@ constexpr uint32_t ShIndex(uint32_t l, int32_t m) {
   return static_cast<uint32_t>(static_cast<int32_t>(l * (l + 1)) + m);
 }
 
+// What a light's coefficients and intensity are measured in (ShLight::units).
+enum class ShLightUnits : uint32_t {
+  // Not stated: a message recorded before the field existed (its reserved zero). Consumers apply
+  // their documented default (docs/messages.md, "ShLight").
+  kUnknown = 0,
+  // Linear RGB radiance in the units of the camera's image intensities at its exposure (the
+  // contract below): what scene_light, face_light (linear_output) and light_fusion publish.
+  kLinear = 1,
+  // A face model's albedo-normalised, compressed I^g units (face_light linear_output false): only
+  // the direction is meaningful; never combine or shade with it as radiance.
+  kFaceModel = 2,
+  // Linear in shape but of arbitrary scale (e.g. a data set's unit-intensity directional light):
+  // direction and relative coefficients are meaningful, the magnitude is not.
+  kLinearUnscaled = 3,
+};
+constexpr std::string_view DescribeEnum(ShLightUnits) {
+  return "ShLightUnits{unknown=0,linear=1,face_model=2,linear_unscaled=3}";
+}
+
+// "unknown", "linear", "face_model", "linear_unscaled"; "" for a value outside the enum.
+constexpr std::string_view ShLightUnitsName(ShLightUnits units) {
+  switch (units) {
+    case ShLightUnits::kUnknown:
+      return "unknown";
+    case ShLightUnits::kLinear:
+      return "linear";
+    case ShLightUnits::kFaceModel:
+      return "face_model";
+    case ShLightUnits::kLinearUnscaled:
+      return "linear_unscaled";
+  }
+  return "";
+}
+
+// The units named `name` (ShLightUnitsName); throws MessageError naming the accepted names.
+inline ShLightUnits ShLightUnitsFromName(std::string_view name) {
+  for (ShLightUnits u : {ShLightUnits::kUnknown, ShLightUnits::kLinear, ShLightUnits::kFaceModel,
+                         ShLightUnits::kLinearUnscaled}) {
+    if (ShLightUnitsName(u) == name) return u;
+  }
+  throw MessageError("probeless_msgs/ShLight: units '" + std::string(name) +
+                     "' is not unknown, linear, face_model or linear_unscaled");
+}
+
 // Distant incident lighting around a point, as seen in frame header.frame_id (camera optical frame
 // or a world frame; directions are expressed in it).
 //
@@ -31,11 +75,13 @@ constexpr uint32_t ShIndex(uint32_t l, int32_t m) {
 // Incident radiance from unit direction w (pointing from the lit point towards the light) is
 // L_c(w) = sum_i coefficients[i][c] * Y_i(w), c = 0, 1, 2 for linear R, G, B, in the linear units
 // of the camera's image intensities (1 = a white Lambertian surface of albedo 1 facing a uniform
-// radiance of 1 reads as full scale).
+// radiance of 1 reads as full scale) when units is kLinear; `units` says what a producer
+// publishes, and consumers check it.
 struct ShLight {
   Header header;
-  uint32_t bands = 0;      // 1..5; coefficient count bands^2 (1, 4, 9, 16, 25)
-  uint32_t reserved0 = 0;  // zero
+  uint32_t bands = 0;  // 1..5; coefficient count bands^2 (1, 4, 9, 16, 25)
+  // Units of coefficients and intensity; kUnknown (0) in messages recorded before the field.
+  ShLightUnits units = ShLightUnits::kUnknown;
   // coefficients[l*(l+1)+m][c]; entries at or beyond bands^2 are zero.
   float coefficients[kMaxShCoefficients][3] = {};
   // Unit direction towards the dominant light (from the scene to the light) in header.frame_id;
@@ -53,7 +99,7 @@ struct ShLight {
     layout::LayoutBuilder b(kTypeName);
     PROBELESS_MSGS_FIELD(b, ShLight, header);
     PROBELESS_MSGS_FIELD(b, ShLight, bands);
-    PROBELESS_MSGS_FIELD(b, ShLight, reserved0);
+    PROBELESS_MSGS_FIELD(b, ShLight, units);
     PROBELESS_MSGS_FIELD(b, ShLight, coefficients);
     PROBELESS_MSGS_FIELD(b, ShLight, dominant_direction);
     PROBELESS_MSGS_FIELD(b, ShLight, intensity);
@@ -64,11 +110,17 @@ struct ShLight {
   // bands^2.
   constexpr uint32_t CoefficientCount() const { return ShCoefficientCount(bands); }
 
-  // Throws MessageError unless 1 <= bands <= 5 and confidence is in [0, 1].
+  // Throws MessageError unless 1 <= bands <= 5, units is a ShLightUnits value and confidence
+  // is in [0, 1].
   void Validate() const {
     if (bands < 1 || bands > kMaxShBands) {
       throw MessageError(std::string(kTypeName) + ": bands " + std::to_string(bands) +
                          " out of range 1..5");
+    }
+    if (ShLightUnitsName(units).empty()) {
+      throw MessageError(std::string(kTypeName) + ": units " +
+                         std::to_string(static_cast<uint32_t>(units)) +
+                         " is not unknown (0), linear (1), face_model (2) or linear_unscaled (3)");
     }
     if (!(confidence >= 0 && confidence <= 1)) {
       throw MessageError(std::string(kTypeName) + ": confidence must be in [0, 1]");
@@ -79,7 +131,8 @@ inline constexpr uint64_t ShLight::kLayoutHash = layout::Fnv1a64(ShLight::Layout
 
 static_assert(Message<ShLight>);
 static_assert(sizeof(ShLight) == 384 && alignof(ShLight) == 8);
-static_assert(offsetof(ShLight, bands) == 56 && offsetof(ShLight, coefficients) == 64 &&
+static_assert(offsetof(ShLight, bands) == 56 && offsetof(ShLight, units) == 60 &&
+              offsetof(ShLight, coefficients) == 64 &&
               offsetof(ShLight, dominant_direction) == 364 && offsetof(ShLight, intensity) == 376 &&
               offsetof(ShLight, confidence) == 380);
 static_assert(ShIndex(0, 0) == 0 && ShIndex(1, -1) == 1 && ShIndex(1, 1) == 3 &&
