@@ -92,6 +92,17 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   eo.direction_bands = node.Param("direction_bands", 2);
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
+  // The light prior (light::LightPrior; chosen on the evaluation world's train / validation
+  // splits, docs/light.md "Light prior").
+  eo.prior.weight = node.Param("prior_weight", 0.0);
+  eo.prior.zonal = {1.0f, static_cast<float>(node.Param("prior_z1", 0.0)),
+                    static_cast<float>(node.Param("prior_z2", 0.0)),
+                    static_cast<float>(node.Param("prior_z3", 0.0))};
+  po.grey_world_colour = node.Param("grey_world_colour", true);
+  if (!(eo.prior.weight >= 0)) {
+    throw node::UsageError("scene_light: prior_weight must be >= 0, got " +
+                           std::to_string(eo.prior.weight));
+  }
   const std::string gbuffer_normals = node.Param("gbuffer_normals", "fusion");
   if (gbuffer_normals != "fusion" && gbuffer_normals != "depth") {
     throw node::UsageError("scene_light: gbuffer_normals must be fusion or depth, got '" +
@@ -398,6 +409,9 @@ int Run(int argc, char** argv) {
       auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
       out->header = header;
       light::FillShLight(e, out.message);
+      for (auto& coefficient : out.message->coefficients) {  // white -> the illuminant's colour
+        for (int c = 0; c < 3; ++c) coefficient[c] *= r.colour[c];
+      }
       light_pub.Publish(std::move(loan));
       ++published;
     }

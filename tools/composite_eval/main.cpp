@@ -44,7 +44,7 @@ namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
     "usage: composite_eval --scenes DIR [--only NAME,...] [--mode gbuffer|depth] --json OUT "
-    "[--sheets DIR]";
+    "[--sheets DIR] [--light-param NAME:=VALUE]...";
 constexpr int kProxyStride = 6;  // px between the scene proxy's vertices (2.5-4 cm at 2-3 m)
 
 struct UsageError : std::runtime_error {
@@ -59,6 +59,7 @@ void OnSignal(int) { composite_eval::RequestStop(); }
 struct Options {
   std::string scenes, json, sheets, mode = "gbuffer";
   std::vector<std::string> only;
+  std::vector<std::string> light_params;  // scene_light param overrides (NAME:=VALUE)
 };
 
 Options ParseOptions(int argc, char** argv) {
@@ -85,6 +86,15 @@ Options ParseOptions(int argc, char** argv) {
       for (std::string name; std::getline(list, name, ',');) {
         if (!name.empty()) o.only.push_back(name);
       }
+    } else if (a == "--light-param") {
+      const std::string rule = value();
+      const size_t sep = rule.find(":=");
+      if (sep == std::string::npos || sep == 0 ||
+          rule.find_first_of(" '\"\\") != std::string::npos) {
+        throw UsageError("--light-param: expected NAME:=VALUE without spaces or quotes, got '" +
+                         rule + "'");
+      }
+      o.light_params.push_back(rule);
     } else if (a == "-h" || a == "--help") {
       std::cout << kUsage << "\n";
       std::exit(0);
@@ -221,6 +231,7 @@ struct FrameRow {
   uint64_t object_pixels = 0;
   std::optional<double> rmse[3], si_rmse[3], effect[3];
   std::optional<double> direction_error;
+  std::optional<msgs::ShLight> light;  // ours: the scene light the renderer used for this frame
 };
 
 struct SceneResult {
@@ -410,6 +421,11 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
                            Fixed(volume.origin[1]) + ", " + Fixed(volume.origin[2]) + "]",
                        "truncation:=" + Fixed(volume.truncation),
                        "depth_max:=" + Fixed(volume.depth_max)};
+  if (!options.light_params.empty()) {  // node args: a --ros-args section before the launch's own
+    std::string light_args = "light_args:=--ros-args";
+    for (const std::string& rule : options.light_params) light_args += " -p " + rule;
+    graph.launch_args.push_back(light_args + " --");
+  }
   ::setenv("PROBELESS_LOG_DIR", (dir / "log").string().c_str(), 1);
   std::cerr << tag << ": running the graph (fusion volume " << Fixed(volume.size) << " m)\n";
   const composite_eval::GraphOutput out = composite_eval::RunGraph(graph, [&](size_t done) {
@@ -477,6 +493,7 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
     if (out.ours.count(e.stamp_ns)) ++frames_with_estimate;
     const eval::TruthFrame* truth = scene.truth ? scene.truth->Find(e.stamp_ns) : nullptr;
     const auto light = out.lights.find(e.stamp_ns);
+    if (light != out.lights.end()) row.light = light->second;
     if (truth != nullptr && truth->direction_camera && truth->direct_to_ambient >= 1 &&
         light != out.lights.end()) {
       row.direction_error =
@@ -564,7 +581,19 @@ void WriteJson(const std::string& path, const Options& options,
           << "_si_rmse_object\": " << Num(row.si_rmse[k]) << ", \"" << kRuns[k]
           << "_rmse_effect\": " << Num(row.effect[k]);
       }
-      j << ", \"direction_error_deg\": " << Num(row.direction_error) << "}";
+      j << ", \"direction_error_deg\": " << Num(row.direction_error);
+      if (row.light) {  // diagnostics: what ours was given (camera frame, msgs SH convention)
+        const msgs::ShLight& l = *row.light;
+        j << ", \"ours_light\": {\"confidence\": " << Num(l.confidence)
+          << ", \"dominant_direction\": [" << Num(l.dominant_direction[0]) << ", "
+          << Num(l.dominant_direction[1]) << ", " << Num(l.dominant_direction[2]) << "], \"sh\": [";
+        for (uint32_t k = 0; k < l.CoefficientCount(); ++k) {
+          j << (k ? ", [" : "[") << Num(l.coefficients[k][0]) << ", " << Num(l.coefficients[k][1])
+            << ", " << Num(l.coefficients[k][2]) << "]";
+        }
+        j << "]}";
+      }
+      j << "}";
     }
     j << "]}" << (s + 1 < results.size() ? "," : "") << "\n";
   }

@@ -178,6 +178,9 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   if (!(options.ridge >= 0) || !(options.smoothness >= 0)) {
     throw LightError("light::SolveLight: ridge and smoothness must be >= 0");
   }
+  if (!(options.prior.weight >= 0) || !std::isfinite(options.prior.weight)) {
+    throw LightError("light::SolveLight: prior.weight must be finite and >= 0");
+  }
   if (options.huber_iterations < 0 || options.tukey_iterations < 0) {
     throw LightError("light::SolveLight: huber_iterations and tukey_iterations must be >= 0");
   }
@@ -236,6 +239,22 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   std::vector<double> l(cc, 0.0), ata(static_cast<size_t>(cc) * cc), atb(cc);
   std::vector<std::array<double, sh::kMaxCoefficients>> penalty;  // non-negativity rows
   double base_trace = 0;
+  // LightPrior's ratios rho_k (rho_0 unused); empty: no prior.
+  std::vector<double> rho;
+  {
+    const Vec3f& u = options.prior.up;
+    const double un = std::sqrt(double(u[0]) * u[0] + double(u[1]) * u[1] + double(u[2]) * u[2]);
+    if (options.prior.weight > 0 && un > 0.5) {
+      std::array<double, sh::kMaxCoefficients> y{};
+      sh::EvaluateBasis<double>(e.bands, u[0] / un, u[1] / un, u[2] / un, y.data());
+      rho.assign(cc, 0.0);
+      for (int k = 1; k < cc; ++k) {
+        const int deg = sh::DegreeOf(k);
+        const double z = deg < 4 ? options.prior.zonal[deg] : 0.0;
+        rho[k] = z / (2 * deg + 1) * y[k] / y[0];
+      }
+    }
+  }
 
   auto solve = [&]() -> bool {
     std::fill(ata.begin(), ata.end(), 0.0);
@@ -249,6 +268,15 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     for (const auto& y : penalty) {
       for (int r = 0; r < cc; ++r) {
         for (int c = 0; c < cc; ++c) ata[r * cc + c] += mu2 * y[r] * y[c];
+      }
+    }
+    if (!rho.empty()) {  // rows sqrt(w) (e_k - rho_k e_0), target 0
+      const double w = options.prior.weight * (trace > 0 ? trace / cc : 1.0);
+      for (int k = 1; k < cc; ++k) {
+        ata[k * cc + k] += w;
+        ata[k * cc + 0] -= w * rho[k];
+        ata[0 * cc + k] -= w * rho[k];
+        ata[0] += w * rho[k] * rho[k];
       }
     }
     const double ridge = options.ridge * (trace > 0 ? trace / cc : 1.0);

@@ -241,6 +241,32 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   r.timings.cpu_ms_transfer = ProcessCpuMs() - cpu_transfer;
   r.has_indirect = indirect && !s.transfer.indirect.empty();
 
+  // The illuminant colour by the grey-world assumption, over the fit's unsaturated pixels.
+  r.colour = {1, 1, 1};
+  if (o.grey_world_colour && f.colour.size() == 3 * static_cast<size_t>(w) * h) {
+    double sum[3] = {0, 0, 0};
+    for (size_t i = 0; i < static_cast<size_t>(w) * h; i += 3) {
+      if (!(view.depth[i] > 0) || f.grey[i] < o.estimate.min_intensity ||
+          f.grey[i] > o.estimate.max_intensity) {
+        continue;
+      }
+      for (int c = 0; c < 3; ++c) sum[c] += SrgbToLinear(f.colour[3 * i + c]);
+    }
+    const double mean = (sum[0] + sum[1] + sum[2]) / 3;
+    if (mean > 0) {
+      for (int c = 0; c < 3; ++c) r.colour[c] = static_cast<float>(sum[c] / mean);
+    }
+  }
+
+  // The light prior's up direction, from the fit's geometry.
+  EstimateOptions estimate = o.estimate;
+  r.up = {};
+  if (estimate.prior.weight > 0) {
+    r.up = EstimateUpDirection(view, o.up);
+    estimate.prior.up = r.up.valid ? r.up.up : Vec3f{0, 0, 0};
+  }
+  s.scene.distant.prior.up = estimate.prior.up;
+
   // The light.
   const auto t_estimate = Clock::now();
   const double cpu_estimate = ThreadCpuMs();
@@ -265,11 +291,11 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
         }
       }
     }
-    r.light = s.temporal.Estimate(s.transfer, f.grey, o.estimate, f.colour,
+    r.light = s.temporal.Estimate(s.transfer, f.grey, estimate, f.colour,
                                   rotated ? rotation : nullptr, weights);
     r.distant = r.light;
   } else if (o.light_model == LightModel::kDistant) {
-    r.light = EstimateLight(s.transfer, f.grey, o.estimate, f.colour, weights);
+    r.light = EstimateLight(s.transfer, f.grey, estimate, f.colour, weights);
     r.distant = r.light;
     if (shadows && r.light.valid) shadow_search(&r.light);
   } else {

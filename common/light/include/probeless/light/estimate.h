@@ -4,6 +4,7 @@
 // linear band (Sloan's optimal linear direction, probeless/sh/sh.h).
 #pragma once
 
+#include <array>
 #include <deque>
 #include <span>
 #include <vector>
@@ -12,6 +13,23 @@
 #include "probeless/light/transfer.h"
 
 namespace probeless::light {
+
+// A prior on the light's shape (beyond the paper): indoors and outdoors light arrives mostly from
+// above (sky, ceiling lamps, lit ceilings) and the image alone cannot separate a surface's albedo
+// from its shading (the albedo groups free one albedo per colour), so the fit is pulled towards
+// a light that is rotationally symmetric about `up` with the band ratios `zonal`. It enters as
+// rows sqrt(w) (l_k - rho_k l_0) = 0 for every coefficient k >= 1, rho_k = (zonal[l] / (2l + 1))
+// Y_k(up) / Y_00 (the zonal function sum_l zonal[l] P_l(up . d) times the light's own band 0), so
+// the light's level stays the data's. Defaults chosen on the evaluation world's train split
+// (docs/light.md, "Light prior").
+struct LightPrior {
+  // Weight relative to trace(T^T T) / coefficient count (as EstimateOptions::ridge); 0 = off.
+  double weight = 0;
+  // Unit up direction in the frame of T (the camera frame); (0, 0, 0) = no prior this frame.
+  Vec3f up{0, 0, 0};
+  // Zonal Legendre coefficients z_l / z_0 of the prior light, bands 0..3 (zonal[0] = 1).
+  std::array<float, 4> zonal{1, 0, 0, 0};
+};
 
 struct EstimateOptions {
   int stride = 4;                // every stride-th pixel in x and y enters the system (>= 1)
@@ -65,6 +83,8 @@ struct EstimateOptions {
   // the surfaces (a warm lamp against a bluish ambient) splits one material over several
   // chromaticity cells by its shading; the invariant coordinate does not (docs/light.md).
   bool albedo_invariant = false;
+  // The shape prior (LightPrior; off by default here, set by the scene pipeline per frame).
+  LightPrior prior;
 };
 
 struct LightEstimate {

@@ -21,6 +21,7 @@
 #include "probeless/light/reliability.h"
 #include "probeless/light/shadow.h"
 #include "probeless/light/transfer.h"
+#include "probeless/light/up_direction.h"
 
 namespace probeless::light {
 
@@ -91,6 +92,15 @@ struct ScenePipelineOptions {
   ShadowOptions shadow;
   bool depth_image_cues = true;
   ShadowGeometry shadow_geometry = ShadowGeometry::kDepthImage;
+
+  // The light prior's up direction (estimate.prior, used when its weight > 0): estimated per frame
+  // from the fit's geometry (EstimateUpDirection); a frame without a horizontal surface in view
+  // gets no prior.
+  UpDirectionOptions up;
+  // The light's colour by the grey-world assumption (the scene's mean albedo is grey, so the
+  // mean linear colour of the fit's pixels is the illuminant's): ScenePipelineResult::colour.
+  // false: white.
+  bool grey_world_colour = true;
 
   // The one-bounce indirect buffer (eq. 10-12) from the previous frame's dominant light: in the
   // result's transfer from the second frame on (none after a frame without a light).
@@ -165,6 +175,11 @@ struct ScenePipelineResult {
   // T of the frame (TransferResult::indirect filled when the indirect buffer was computed).
   const TransferResult* transfer = nullptr;
   bool has_indirect = false;
+  // Per-channel factors (R, G, B; mean 1) for the white light's coefficients: the illuminant
+  // colour (ScenePipelineOptions::grey_world_colour), {1, 1, 1} without a colour image.
+  std::array<float, 3> colour{1, 1, 1};
+  // The up direction of the light prior (valid false: no prior this frame or none asked for).
+  UpDirection up;
   ScenePipelineTimings timings;
 };
 
