@@ -767,6 +767,7 @@ TEST(EstimatorTest, FillShLightCopiesTheEstimate) {
   EXPECT_EQ(light.coefficients[9][0], 0.0f);
   EXPECT_EQ(light.dominant_direction[1], estimate.dominant_direction[1]);
   EXPECT_EQ(light.confidence, estimate.confidence);
+  EXPECT_EQ(light.units, msgs::ShLightUnits::kFaceModel);  // the model's units, not linear
   EXPECT_NO_THROW(light.Validate());
 }
 

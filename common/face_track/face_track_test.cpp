@@ -272,8 +272,10 @@ TEST(LightOutput, JsonLayouts) {
   EXPECT_NEAR(y[1][0], 2, 1e-4);
   EXPECT_NEAR(y[2][0], -3, 1e-4);
   EXPECT_NEAR(y[3][0], -4, 1e-4);
-  const std::string json = LightJson(c, {0, 0, -1}, 2.5f, 0.75f, LightColour(c), 42, "camera");
-  EXPECT_EQ(json.rfind("{\"stamp_ns\":42,\"frame_id\":\"camera\",\"confidence\":0.75,"
+  const std::string json = LightJson(c, {0, 0, -1}, 2.5f, 0.75f, LightColour(c), 42, "camera",
+                                     msgs::ShLightUnits::kLinear);
+  EXPECT_EQ(json.rfind("{\"stamp_ns\":42,\"frame_id\":\"camera\",\"units\":\"linear\","
+                       "\"confidence\":0.75,"
                        "\"intensity\":2.5,\"dominant_direction\":[0,0,-1],",
                        0),
             0u)
@@ -290,6 +292,15 @@ TEST(LightOutput, JsonLayouts) {
       << json;
   const auto colour = LightColour(c);
   EXPECT_NEAR(colour[0] + colour[1] + colour[2], 3, 1e-5);
+  // A light in the face model's compressed units is not exported as radiance.
+  try {
+    LightJson(c, {0, 0, -1}, 2.5f, 0.75f, colour, 42, "camera", msgs::ShLightUnits::kFaceModel);
+    FAIL() << "no exception";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_STREQ(e.what(),
+                 "LightJson: the ARKit and WebXR exports take linear radiance, got face_model "
+                 "units");
+  }
 }
 
 // The numbers after `key` in json: the arrays' values in order (nested brackets flattened).
@@ -368,9 +379,9 @@ TEST(LightOutput, LinearExportsOfAKnownLight) {
   const std::array<double, 3> ambient{0.06, 0.05, 0.07};
   // The export itself: exact to the printed precision.
   const Sh9Rgb known = KnownLight(d, power, ambient);
-  ExpectExportsOf(
-      LightJson(known, {0.48f, -0.36f, -0.8f}, 1.87f, 0.6f, LightColour(known), 1, "camera"), d,
-      power, ambient, 1e-5);
+  ExpectExportsOf(LightJson(known, {0.48f, -0.36f, -0.8f}, 1.87f, 0.6f, LightColour(known), 1,
+                            "camera", msgs::ShLightUnits::kLinear),
+                  d, power, ambient, 1e-5);
   // Through the face model and the linear conversion (frontal head: face frame = camera frame),
   // the direction refined for the linear residual: within 3 %.
   const fl::FaceLightModel model =
@@ -385,9 +396,9 @@ TEST(LightOutput, LinearExportsOfAKnownLight) {
   const fl::LinearLight light = converter.Convert(rgb, {}, estimator.EstimateRgb(rgb));
   ASSERT_TRUE(light.valid);
   const Sh9Rgb camera = RotateSh9(light.coefficients, {1, 0, 0, 0, 1, 0, 0, 0, 1});
-  ExpectExportsOf(
-      LightJson(camera, light.direction, light.intensity, 0.6f, LightColour(camera), 1, "camera"),
-      d, power, ambient, 0.03);
+  ExpectExportsOf(LightJson(camera, light.direction, light.intensity, 0.6f, LightColour(camera), 1,
+                            "camera", msgs::ShLightUnits::kLinear),
+                  d, power, ambient, 0.03);
 }
 
 // Irradiance (Lambertian, K&K eq. 20 / Ramamoorthi-Hanrahan) of channel-mean light at normal n.

@@ -6,6 +6,8 @@
 
 #include <cmath>
 #include <numbers>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "probeless/sh/sh.h"
@@ -28,6 +30,7 @@ FusionInput Light(int64_t stamp, float confidence, float dc, float dx, float dy,
   l.dominant_direction[2] = dz;
   l.intensity = dc;
   l.confidence = confidence;
+  l.units = msgs::ShLightUnits::kLinear;
   return in;
 }
 
@@ -47,6 +50,7 @@ FusionInput Directional(const sh::Vec3& d, double power, float confidence, const
   for (int k = 0; k < 3; ++k) l.dominant_direction[k] = static_cast<float>(d[k]);
   l.intensity = static_cast<float>(power);
   l.confidence = confidence;
+  l.units = msgs::ShLightUnits::kLinear;
   return in;
 }
 
@@ -189,15 +193,25 @@ TEST(FuseLightsTest, ConfidenceCalibrationMapsRawConfidences) {
 TEST(FuseLightsTest, DifferentUnitsAreRefused) {
   std::vector<FusionInput> in = {Light(100, 0.5f, 1.0f, 1, 0, 0), Light(100, 0.5f, 1.0f, 1, 0, 0)};
   in[0].name = "face/light";
-  in[0].units = LightUnits::kRelative;
-  try {
-    FuseLights(in);
-    FAIL() << "no exception";
-  } catch (const FusionError& e) {
-    EXPECT_STREQ(e.what(),
-                 "light fusion: 'face/light' is in relative (face-model) units, expected linear "
-                 "radiance (msgs::ShLight); not averaged");
+  const std::pair<msgs::ShLightUnits, const char*> cases[] = {
+      {msgs::ShLightUnits::kFaceModel, "face_model"},
+      {msgs::ShLightUnits::kLinearUnscaled, "linear_unscaled"},
+      {msgs::ShLightUnits::kUnknown, "unknown"}};
+  for (const auto& [units, name] : cases) {
+    in[0].light.units = units;
+    try {
+      FuseLights(in);
+      FAIL() << "no exception for " << name;
+    } catch (const FusionError& e) {
+      EXPECT_EQ(std::string(e.what()), std::string("light fusion: 'face/light' is in ") + name +
+                                           " units, expected linear radiance (msgs::ShLight); "
+                                           "not averaged");
+    }
   }
+  in[0].light.units = msgs::ShLightUnits::kLinear;
+  const auto fused = FuseLights(in);
+  ASSERT_TRUE(fused);
+  EXPECT_EQ(fused->units, msgs::ShLightUnits::kLinear);
 }
 
 TEST(FuseLightsTest, DifferentFramesAreAnError) {

@@ -3,7 +3,7 @@
 // optionally smoothed, exported as JSON (docs/face_light.md, "face_light node").
 //
 // Subscribes `face/observation` (msgs::FaceObservation); publishes `face/light` (msgs::ShLight,
-// header and frame of the observation = the camera frame, linear radiance: the model's estimate
+// header and frame of the observation = the camera frame, units kLinear: the model's estimate
 // converted by face_light::LinearLightConverter with the skin albedo compensated; confidence on
 // the ShLight scale from the calibrated expected error) for every observation with a face and
 // enough valid samples; a light below hold_confidence (unlit, backlit face) is replaced by the
@@ -16,7 +16,8 @@
 // directional_fit (true: dominant direction by the directional-light fit), directional_robust (0),
 // smoothing (true), smoothing_alpha (0.3), change_threshold (0.35), json_path ("" = none),
 // json_mode (frame: one JSON line per estimate appended to json_path | exit: the last estimate
-// written on exit), linear_output (true; false = the model's compressed units, no hold),
+// written on exit; needs linear_output), linear_output (true; false = the model's compressed
+// units, msgs::ShLightUnits::kFaceModel, no hold),
 // skin_albedo ([0.47, 0.32, 0.25] linear RGB), unit_scale (0.223), hold_confidence (0.1),
 // hold_blend_s (2.0).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or model (one line on stderr), 1 otherwise.
@@ -84,6 +85,11 @@ int Run(int argc, char** argv) {
   }
 
   const bool linear_output = node.Param("linear_output", true);
+  if (!json_path.empty() && !linear_output) {
+    throw node::UsageError(
+        "face_light: json_path exports ARKit / WebXR light, which is linear radiance; it needs "
+        "linear_output true");
+  }
   fl::LinearLightOptions lo;
   const std::vector<double> albedo =
       node.Param("skin_albedo", std::vector<double>(lo.skin_albedo.begin(), lo.skin_albedo.end()));
@@ -202,12 +208,13 @@ int Run(int argc, char** argv) {
     for (int k = 0; k < 3; ++k) out->dominant_direction[k] = direction[k];
     out->intensity = intensity;
     out->confidence = std::clamp(confidence, 0.f, 1.f);
+    out->units = linear_output ? msgs::ShLightUnits::kLinear : msgs::ShLightUnits::kFaceModel;
     lights.Publish(std::move(loan));
     ++published;
     if (!json_path.empty()) {
       last_json = ft::LightJson(camera, direction, intensity, std::clamp(confidence, 0.f, 1.f),
                                 ft::LightColour(camera), obs->header.stamp_ns,
-                                std::string(obs->header.FrameId()));
+                                std::string(obs->header.FrameId()), out->units);
       if (json_mode == "frame") json << last_json << '\n' << std::flush;
     }
   };

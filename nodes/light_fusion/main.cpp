@@ -5,14 +5,18 @@
 // the latest of each. Params: max_age_s (0.5: an input that much older than the newest is
 // ignored), min_confidence (0.05), consistency_sigma (3: the less confident of two inputs further
 // apart than that many combined expected errors is left out; 0 = off), face_units / scene_units
-// (linear | relative: what the producer publishes; a relative input is refused with one warning,
-// never averaged), face_calibration / scene_calibration ([] = on the scale; else pairs raw
-// confidence, expected error in degrees: light::ConfidenceCalibration). Exit: 0 on SIGINT/SIGTERM,
-// 2 on bad params, 1 otherwise.
+// (linear | face_model | linear_unscaled: the units taken for a message whose units field is
+// unknown, i.e. one recorded before the field; default linear, what face_light and scene_light
+// published then), face_calibration / scene_calibration ([] = on the scale; else pairs raw
+// confidence, expected error in degrees: light::ConfidenceCalibration). An input in other than
+// linear units is refused with one warning per input and units, never averaged (no conversion
+// exists without the face's samples); the other input is still followed. The output is linear.
+// Exit: 0 on SIGINT/SIGTERM, 2 on bad params, 1 otherwise.
 #include "probeless/node/main.h"
 
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "probeless/light/fusion.h"
 #include "probeless/msgs/sh_light.h"
@@ -22,10 +26,13 @@ namespace {
 
 using namespace probeless;
 
-light::LightUnits Units(const std::string& name, const std::string& value) {
-  if (value == "linear") return light::LightUnits::kLinear;
-  if (value == "relative") return light::LightUnits::kRelative;
-  throw node::UsageError("param " + name + " must be linear or relative, got '" + value + "'");
+msgs::ShLightUnits Units(const std::string& name, const std::string& value) {
+  for (msgs::ShLightUnits u : {msgs::ShLightUnits::kLinear, msgs::ShLightUnits::kFaceModel,
+                               msgs::ShLightUnits::kLinearUnscaled}) {
+    if (msgs::ShLightUnitsName(u) == value) return u;
+  }
+  throw node::UsageError("param " + name + " must be linear, face_model or linear_unscaled, got '" +
+                         value + "'");
 }
 
 int Run(int argc, char** argv) {
@@ -39,7 +46,8 @@ int Run(int argc, char** argv) {
   if (!(options.consistency_sigma >= 0)) {
     throw node::UsageError("param consistency_sigma must be >= 0");
   }
-  const light::LightUnits units[2] = {
+  // For messages without a units field (logs recorded before it).
+  const msgs::ShLightUnits unknown_as[2] = {
       Units("face_units", node.Param("face_units", std::string("linear"))),
       Units("scene_units", node.Param("scene_units", std::string("linear")))};
   // Raw confidences onto the ShLight scale, per input (empty = already on it).
@@ -51,7 +59,9 @@ int Run(int argc, char** argv) {
   bus::Publisher out = node.CreatePublisher<msgs::ShLight>("light");
   const std::string names[2] = {face.topic(), scene.topic()};
   std::optional<msgs::ShLight> latest[2];
-  bool warned[2] = {false, false};
+  // The units (and whether the message declared them) last warned about per input: a change
+  // warns again.
+  std::optional<std::pair<msgs::ShLightUnits, bool>> warned[2];
   uint64_t published = 0;
   auto handler = [&](int which) {
     return [&, which](bus::Sample&& sample) {
@@ -59,16 +69,22 @@ int Run(int argc, char** argv) {
       std::vector<light::FusionInput> inputs;
       for (int k = 0; k < 2; ++k) {
         if (!latest[k]) continue;
-        if (units[k] != light::LightUnits::kLinear) {
+        light::FusionInput input{*latest[k], names[k]};
+        const bool declared = input.light.units != msgs::ShLightUnits::kUnknown;
+        if (!declared) input.light.units = unknown_as[k];
+        if (input.light.units != msgs::ShLightUnits::kLinear) {
           // Refused, never averaged raw: the other input is still followed.
-          if (!warned[k]) {
-            node.Warn() << names[k] << " is declared in relative units (" << (k ? "scene" : "face")
-                        << "_units); it is refused, only linear lights are fused";
-            warned[k] = true;
+          const std::pair<msgs::ShLightUnits, bool> key{input.light.units, declared};
+          if (warned[k] != key) {
+            node.Warn() << names[k] << " is in " << msgs::ShLightUnitsName(input.light.units)
+                        << " units ("
+                        << (declared ? std::string("its units field")
+                                     : std::string(k ? "scene" : "face") + "_units")
+                        << "); it is refused, only linear lights are fused";
+            warned[k] = key;
           }
           continue;
         }
-        light::FusionInput input{*latest[k], units[k], names[k]};
         input.light.confidence = static_cast<float>(calibration[k].Apply(input.light.confidence));
         inputs.push_back(input);
       }

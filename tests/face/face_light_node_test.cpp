@@ -2,12 +2,14 @@
 // forward model, LinearLightConverter::Predict, frontal head): a lit face is published as linear
 // light with a confident direction; then a backlit face (ambient only) is published with a low
 // confidence and the held light fading to its ambient term, never lit from the front
-// (docs/face_light.md, "face_light node", Hold); bad params exit 2 with one line.
+// (docs/face_light.md, "face_light node", Hold); linear_output false says units face_model; bad
+// params (also a JSON export of non-linear light) exit 2 with one line.
 #include <gtest/gtest.h>
 #include <signal.h>
 
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <numbers>
 #include <string>
 #include <thread>
@@ -66,6 +68,7 @@ TEST(FaceLightNodeTest, BacklitFaceHoldsTheLastConfidentLight) {
   auto first = lights.Take(5s);
   ASSERT_TRUE(first) << node.Err();
   const msgs::ShLight a = *msgs::ReadMessage<msgs::ShLight>(first->data());
+  EXPECT_EQ(a.units, msgs::ShLightUnits::kLinear);
   // Linear: the directional power comes back (the default conversion: within 6 %), confident.
   EXPECT_NEAR(a.intensity, 2.0, 0.12);
   EXPECT_GT(a.confidence, 0.3f);
@@ -112,6 +115,39 @@ TEST(FaceLightNodeTest, BadParamsExitTwoWithOneLine) {
   EXPECT_EQ(b.err,
             "[error] [face_light] face_light: hold_confidence must be in [0, 1] and hold_blend_s > "
             "0\n");
+  const auto c = probeless::testing::RunCommand(
+      std::string(PROBELESS_BIN_DIR) +
+          "/face_light --ros-args -p linear_output:=false -p json_path:=lights.jsonl",
+      dir.path());
+  EXPECT_EQ(c.code, 2);
+  EXPECT_EQ(c.err,
+            "[error] [face_light] face_light: json_path exports ARKit / WebXR light, which is "
+            "linear radiance; it needs linear_output true\n");
+}
+
+TEST(FaceLightNodeTest, ModelUnitsSayFaceModel) {
+  const fl::FaceLightModel model =
+      fl::LoadModel(std::string(PROBELESS_SOURCE_DIR) + "/data/face_light/default_model.txt");
+  const fl::LinearLightConverter converter(model);
+  bus::Subscriber lights("/fl_units/light", msgs::TopicTypeOf<msgs::ShLight>(), {.queue_depth = 4});
+  bus::Publisher observations("/fl_units/observation", msgs::TopicTypeOf<msgs::FaceObservation>(),
+                              {.max_message_bytes = sizeof(msgs::FaceObservation)});
+  probeless::testing::Process node(
+      "face_light",
+      {"--ros-args", "-r", "face/observation:=/fl_units/observation", "-r",
+       "face/light:=/fl_units/light", "-p", "smoothing:=false", "-p", "linear_output:=false"});
+  for (int i = 0; i < 500 && observations.SubscriberCount() == 0; ++i) {
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(observations.SubscriberCount(), 1u) << node.Err();
+  const auto lit = std::make_unique<msgs::FaceObservation>(
+      Observation(converter, 1'000'000'000, {0, 0, -1}, 2.0, 0.05));
+  observations.PublishCopy(std::as_bytes(std::span(lit.get(), 1)));
+  auto light = lights.Take(5s);
+  ASSERT_TRUE(light) << node.Err();
+  EXPECT_EQ(msgs::ReadMessage<msgs::ShLight>(light->data())->units, msgs::ShLightUnits::kFaceModel);
+  node.Signal(SIGINT);
+  EXPECT_EQ(node.Wait(5s), 0) << node.Err();
 }
 
 }  // namespace

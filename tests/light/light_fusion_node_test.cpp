@@ -1,7 +1,7 @@
 // The light_fusion node as a process: a face and a scene light in, their confidence-weighted fusion
 // out on `light` (inverse-variance weights on the ShLight confidence scale); a disagreeing less
-// confident input left out; an input declared in relative units refused; bad params exit 2 with
-// one line.
+// confident input left out; an input in face-model units (declared by its units field, or by
+// face_units for a message without one) refused; bad params exit 2 with one line.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -33,6 +33,7 @@ msgs::ShLight Light(float confidence, float x, float y, float z) {
   l.dominant_direction[2] = z;
   l.intensity = 1;
   l.confidence = confidence;
+  l.units = msgs::ShLightUnits::kLinear;
   return l;
 }
 
@@ -75,36 +76,53 @@ TEST(LightFusionNodeTest, FusesTheFaceAndSceneLights) {
   const auto alone = msgs::ReadMessage<msgs::ShLight>(third->data());
   EXPECT_FLOAT_EQ(alone->confidence, 0.75f);
   EXPECT_FLOAT_EQ(alone->dominant_direction[0], 1.0f);
+  EXPECT_EQ(alone->units, msgs::ShLightUnits::kLinear);
   node.Signal(SIGINT);
   EXPECT_EQ(node.Wait(5s), 0) << node.Err();
 }
 
-TEST(LightFusionNodeTest, RelativeUnitsAreRefused) {
+TEST(LightFusionNodeTest, FaceModelUnitsAreRefused) {
   bus::Subscriber fused("/light", msgs::TopicTypeOf<msgs::ShLight>(), {.queue_depth = 8});
   bus::Publisher face("/face/light", msgs::TopicTypeOf<msgs::ShLight>(),
                       {.max_message_bytes = sizeof(msgs::ShLight)});
   bus::Publisher scene("/scene/light", msgs::TopicTypeOf<msgs::ShLight>(),
                        {.max_message_bytes = sizeof(msgs::ShLight)});
-  probeless::testing::Process node("light_fusion", {"--ros-args", "-r", "face/light:=/face/light",
-                                                    "-r", "scene/light:=/scene/light", "-r",
-                                                    "light:=/light", "-p", "face_units:=relative"});
+  probeless::testing::Process node(
+      "light_fusion",
+      {"--ros-args", "-r", "face/light:=/face/light", "-r", "scene/light:=/scene/light", "-r",
+       "light:=/light", "-p", "face_units:=face_model"});
   for (int i = 0; i < 300 && (face.SubscriberCount() == 0 || scene.SubscriberCount() == 0); ++i) {
     std::this_thread::sleep_for(10ms);
   }
   ASSERT_EQ(scene.SubscriberCount(), 1u);
-  const msgs::ShLight a = Light(0.75f, 1, 0, 0);
-  const msgs::ShLight b = Light(0.5f, 0, 1, 0);
+  // A face light of an old log (no units field): face_units says face_model.
+  msgs::ShLight a = Light(0.75f, 1, 0, 0);
+  a.units = msgs::ShLightUnits::kUnknown;
+  msgs::ShLight b = Light(0.5f, 0, 1, 0);
+  b.units = msgs::ShLightUnits::kUnknown;  // scene_units: linear (the default)
   face.PublishCopy(std::as_bytes(std::span(&a, 1)));
   EXPECT_FALSE(fused.Take(300ms));  // refused, nothing to publish
   scene.PublishCopy(std::as_bytes(std::span(&b, 1)));
   auto out = fused.Take(2s);
   ASSERT_TRUE(out);
-  // The scene light alone: never averaged with the relative face light.
+  // The scene light alone: never averaged with the face-model light; published as linear.
   EXPECT_FLOAT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->confidence, 0.5f);
   EXPECT_FLOAT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->dominant_direction[1], 1.0f);
+  EXPECT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->units, msgs::ShLightUnits::kLinear);
+  // A face light that declares face-model units is refused by its field.
+  a.units = msgs::ShLightUnits::kFaceModel;
+  a.header.stamp_ns += 1000;
+  face.PublishCopy(std::as_bytes(std::span(&a, 1)));
+  out = fused.Take(2s);
+  ASSERT_TRUE(out);
+  EXPECT_FLOAT_EQ(msgs::ReadMessage<msgs::ShLight>(out->data())->confidence, 0.5f);
   node.Signal(SIGINT);
   EXPECT_EQ(node.Wait(5s), 0) << node.Err();
-  EXPECT_NE(node.Err().find("/face/light is declared in relative units (face_units); it is "
+  EXPECT_NE(node.Err().find("/face/light is in face_model units (face_units); it is refused, "
+                            "only linear lights are fused"),
+            std::string::npos)
+      << node.Err();
+  EXPECT_NE(node.Err().find("/face/light is in face_model units (its units field); it is "
                             "refused, only linear lights are fused"),
             std::string::npos)
       << node.Err();
@@ -120,7 +138,8 @@ TEST(LightFusionNodeTest, BadParamsExitTwoWithOneLine) {
       std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p face_units:=gamma", dir.path());
   EXPECT_EQ(u.code, 2);
   EXPECT_EQ(u.err,
-            "[error] [light_fusion] param face_units must be linear or relative, got 'gamma'\n");
+            "[error] [light_fusion] param face_units must be linear, face_model or "
+            "linear_unscaled, got 'gamma'\n");
   const auto c = probeless::testing::RunCommand(
       std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p 'scene_calibration:=[0.5]'",
       dir.path());

@@ -106,6 +106,13 @@ TEST(SceneLightLaunch, SimInLockStepWithSceneLight) {
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log;
   EXPECT_EQ(truth.size(), 3u) << log;
   ASSERT_EQ(estimated.size(), 3u) << log;
+  // Both say they are linear radiance in the camera's units (msgs::ShLight::units).
+  for (const auto& [sequence, light] : estimated) {
+    EXPECT_EQ(light.units, msgs::ShLightUnits::kLinear) << sequence;
+  }
+  for (const auto& [sequence, light] : truth) {
+    EXPECT_EQ(light.units, msgs::ShLightUnits::kLinear) << sequence;
+  }
   EXPECT_EQ(transfer_shape.size(), 3u);
   ASSERT_EQ(indirect.size(), 2u) << log;  // frames 2 and 3: frame 1 has no previous light
   EXPECT_FALSE(indirect.count(estimated.begin()->first));

@@ -150,6 +150,7 @@ class EvalSource : public dataset::Source {
     light->header = frame_header_;
     light->bands = 3;
     light->confidence = 1;
+    light->units = msgs::ShLightUnits::kLinear;  // truth.json's probe and the image's mean
     fill(*light);
     return m;
   }

@@ -36,6 +36,7 @@
 #include "probeless/render/differential.h"
 #include "probeless/render/renderer.h"
 #include "probeless/sh/sh.h"
+#include "probeless/parse/number.h"
 
 namespace {
 
@@ -90,22 +91,31 @@ int main(int argc, char** argv) {
   int frames = 300;
   int triangles = 50000;
   std::string backend = "offscreen";
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--json" && i + 1 < argc)
-      json_path = argv[++i];
-    else if (a == "--frames" && i + 1 < argc)
-      frames = std::max(10, std::atoi(argv[++i]));
-    else if (a == "--triangles" && i + 1 < argc)
-      triangles = std::max(100, std::atoi(argv[++i]));
-    else if (a == "--backend" && i + 1 < argc)
-      backend = argv[++i];
-    else {
-      std::fprintf(stderr,
-                   "usage: render_bench [--json OUT] [--frames N] [--triangles T] "
-                   "[--backend offscreen|window]\n");
-      return 2;
+  constexpr const char* kUsage =
+      "usage: render_bench [--json OUT] [--frames N] [--triangles T] "
+      "[--backend offscreen|window]\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") {
+        std::printf("%s", kUsage);
+        return 0;
+      } else if (a == "--json" && i + 1 < argc) {
+        json_path = argv[++i];
+      } else if (a == "--frames" && i + 1 < argc) {
+        frames = probeless::parse::ParseInteger<int>(a, argv[++i], 10);
+      } else if (a == "--triangles" && i + 1 < argc) {
+        triangles = probeless::parse::ParseInteger<int>(a, argv[++i], 100);
+      } else if (a == "--backend" && i + 1 < argc) {
+        backend = argv[++i];
+      } else {
+        std::fprintf(stderr, "%s", kUsage);
+        return 2;
+      }
     }
+  } catch (const probeless::parse::NumberError& e) {
+    std::fprintf(stderr, "render_bench: %s\n", e.what());
+    return 2;
   }
   try {
     const std::string domain = "render_bench_" + std::to_string(getpid());
@@ -285,6 +295,7 @@ int main(int argc, char** argv) {
           auto m = msgs::WriteMessage<msgs::ShLight>(loan.data());
           const render::ShLightRgb l = Light(f * 0.05);
           m->bands = 3;
+          m->units = msgs::ShLightUnits::kLinear;
           for (int k = 0; k < 9; ++k)
             for (int c = 0; c < 3; ++c) m->coefficients[k][c] = l.coefficients[k][c];
           m->header.StampNow();

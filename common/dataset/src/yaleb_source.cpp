@@ -128,6 +128,7 @@ class YaleBSource : public FrameSource {
     for (int k = 0; k < 3; ++k) light->dominant_direction[k] = static_cast<float>(d[k]);
     light->intensity = 1;
     light->confidence = 1;
+    light->units = msgs::ShLightUnits::kLinearUnscaled;  // a unit light: its scale is unknown
     out.push_back(std::move(message));
     return true;
   }

@@ -1409,6 +1409,7 @@ void FillShLight(const LightEstimate& estimate, msgs::ShLight& out) {
   for (int k = 0; k < 3; ++k) out.dominant_direction[k] = estimate.dominant_direction[k];
   out.intensity = estimate.intensity;
   out.confidence = std::clamp(estimate.confidence, 0.0f, 1.0f);
+  out.units = msgs::ShLightUnits::kFaceModel;
 }
 
 }  // namespace probeless::face_light

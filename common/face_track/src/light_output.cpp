@@ -202,10 +202,17 @@ std::string Escape(const std::string& in) {
 
 std::string LightJson(const Sh9Rgb& coefficients_camera, const std::array<float, 3>& direction,
                       float intensity, float confidence, const std::array<float, 3>& colour,
-                      int64_t stamp_ns, const std::string& frame_id) {
+                      int64_t stamp_ns, const std::string& frame_id, msgs::ShLightUnits units) {
+  if (units != msgs::ShLightUnits::kLinear) {
+    const std::string_view name = msgs::ShLightUnitsName(units);
+    throw std::invalid_argument(
+        "LightJson: the ARKit and WebXR exports take linear radiance, got " +
+        (name.empty() ? std::to_string(static_cast<uint32_t>(units)) : std::string(name)) +
+        " units");
+  }
   const Sh9Rgb y_up = ToYUpFrame(coefficients_camera);
   std::string s = "{\"stamp_ns\":" + std::to_string(stamp_ns) + ",\"frame_id\":\"" +
-                  Escape(frame_id) + "\",\"confidence\":";
+                  Escape(frame_id) + "\",\"units\":\"linear\",\"confidence\":";
   AppendFloat(s, confidence);
   s += ",\"intensity\":";
   AppendFloat(s, intensity);

@@ -75,10 +75,10 @@ std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
   for (size_t i = 0; i < inputs.size(); ++i) {
     const msgs::ShLight& in = inputs[i].light;
     in.Validate();
-    if (inputs[i].units != LightUnits::kLinear) {
-      throw FusionError("light fusion: " + Name(inputs[i], i) +
-                        " is in relative (face-model) units, expected linear radiance "
-                        "(msgs::ShLight); not averaged");
+    if (in.units != msgs::ShLightUnits::kLinear) {
+      throw FusionError("light fusion: " + Name(inputs[i], i) + " is in " +
+                        std::string(msgs::ShLightUnitsName(in.units)) +
+                        " units, expected linear radiance (msgs::ShLight); not averaged");
     }
     if (in.header.FrameId() != inputs[0].light.header.FrameId()) {
       throw FusionError("light fusion: inputs in different frames ('" +
@@ -119,6 +119,7 @@ std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
       used.begin(), used.end(),
       [](const auto* a, const auto* b) { return a->header.stamp_ns < b->header.stamp_ns; });
   out.header = newest_input->header;
+  out.units = msgs::ShLightUnits::kLinear;
   for (const auto* in : used) out.bands = std::max(out.bands, in->bands);
   double sums[msgs::kMaxShCoefficients][3] = {};
   double direction[3] = {};

@@ -169,6 +169,7 @@ void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale) {
   for (int k = 0; k < 3; ++k) out->dominant_direction[k] = e.dominant_direction[k];
   out->intensity = e.intensity * scale;
   out->confidence = std::clamp(e.confidence, 0.0f, 1.0f);
+  out->units = msgs::ShLightUnits::kLinear;
 }
 
 void FillIndirectImage(const TransferResult& result, msgs::Image* out,

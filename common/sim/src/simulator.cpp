@@ -233,6 +233,7 @@ SimFrame Simulator::Render(uint64_t index) {
     const double mean = sum / static_cast<double>(pixels);
     if (mean > 1e-9) exposure *= 0.18 / mean;
   }
+  f.exposure = exposure;
   const bool plain_rgb = exposure == 1 && sensor.color_noise == 0;
   if (plain_rgb) {
     f.rgb = f.render.srgb;
@@ -457,13 +458,16 @@ class SimSource final : public dataset::Source {
       auto emit = [&](size_t topic, const raytrace::LightingGroundTruth& truth) {
         auto light = Start<msgs::ShLight>(topic, t, sizeof(msgs::ShLight));
         FillHeader(light->header, t, seq, cam);
+        // Times the frame's exposure: in the units of the image it goes with.
+        const float e = static_cast<float>(f.exposure);
         light->bands = 3;
         for (int i = 0; i < 9; ++i) {
-          for (int ch = 0; ch < 3; ++ch) light->coefficients[i][ch] = truth.sh[i][ch];
+          for (int ch = 0; ch < 3; ++ch) light->coefficients[i][ch] = e * truth.sh[i][ch];
         }
         for (int k = 0; k < 3; ++k) light->dominant_direction[k] = truth.dominant_direction[k];
-        light->intensity = truth.dominant_irradiance;
+        light->intensity = e * truth.dominant_irradiance;
         light->confidence = 1;
+        light->units = msgs::ShLightUnits::kLinear;
       };
       emit(light_, f.light);
       if (has_face_) emit(face_light_, f.face_light);

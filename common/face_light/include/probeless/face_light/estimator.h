@@ -173,8 +173,9 @@ class FaceLightEstimator {
 
 // Writes an estimate into an msgs::ShLight (bands = 3, coefficients, dominant_direction,
 // intensity, confidence) as it is, i.e. in the model's units (compressed I^g for g != 1, scaled
-// by the face's albedo): NOT the message's linear units; convert with LinearLightConverter
-// (linear_light.h) for a light others consume. The header is left to the caller.
+// by the face's albedo), and says so: units = msgs::ShLightUnits::kFaceModel, NOT the message's
+// linear units; convert with LinearLightConverter (linear_light.h) for a light others consume.
+// The header is left to the caller.
 void FillShLight(const LightEstimate& estimate, msgs::ShLight& out);
 
 }  // namespace probeless::face_light

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "probeless/face_light/estimator.h"
+#include "probeless/msgs/sh_light.h"
 
 namespace probeless::face_track {
 
@@ -100,15 +101,17 @@ class LightHold {
 };
 
 // One light as JSON (one line, no trailing newline):
-// {"stamp_ns":S,"frame_id":"camera","confidence":c,"intensity":i,"dominant_direction":[x,y,z],
-//  "colour":[r,g,b],
+// {"stamp_ns":S,"frame_id":"camera","units":"linear","confidence":c,"intensity":i,
+//  "dominant_direction":[x,y,z],"colour":[r,g,b],
 //  "arkit":{"sphericalHarmonicsCoefficients":[[9 R],[9 G],[9 B]]},          planar 3 x 9
 //  "webxr":{"sphericalHarmonicsCoefficients":[r0,g0,b0,r1,g1,b1,...]}}     interleaved 27
 // ARKit and WebXR coefficient order and sign conventions are documented in docs/face_light.md;
 // the values are this project's SH convention converted to theirs (y up, z towards the viewer).
+// ARKit and WebXR shade with linear radiance, so `units` must be msgs::ShLightUnits::kLinear (the
+// light's msgs::ShLight units); anything else throws std::invalid_argument naming the units.
 std::string LightJson(const Sh9Rgb& coefficients_camera, const std::array<float, 3>& direction,
                       float intensity, float confidence, const std::array<float, 3>& colour,
-                      int64_t stamp_ns, const std::string& frame_id);
+                      int64_t stamp_ns, const std::string& frame_id, msgs::ShLightUnits units);
 
 // The camera-frame coefficients converted to the ARKit / WebXR frame (x right, y up, z towards
 // the viewer: a rotation of 180 degrees about x) in this project's basis order l(l+1)+m — the

@@ -48,15 +48,10 @@ class ConfidenceCalibration {
   std::vector<double> raw_, error_deg_;
 };
 
-// Units of a light's coefficients. kLinear: msgs::ShLight's contract (linear RGB radiance, 1 =
-// full scale of the image); kRelative: a face model's albedo-normalised, compressed units (only
-// the direction is meaningful), e.g. face_light with linear_output false.
-enum class LightUnits { kLinear, kRelative };
-
-// One input: a light, the units its producer declares, and a name for messages (e.g. the topic).
+// One input: a light (its units in light.units, msgs::ShLightUnits) and a name for messages
+// (e.g. the topic).
 struct FusionInput {
   msgs::ShLight light;
-  LightUnits units = LightUnits::kLinear;
   std::string name;
 };
 
@@ -84,9 +79,11 @@ struct FusionOptions {
 //   are left out); intensity: the w-weighted mean;
 // - confidence: from the summed weights, W / (1 + W) (inverse variances add);
 // - header: the newest used input's.
-// Returns nullopt when no input qualifies. Throws FusionError naming the input when one is not
-// in linear units (they are never averaged raw), when the frames differ (naming both), or when an
-// input fails ShLight::Validate.
+// - units: the output is msgs::ShLightUnits::kLinear.
+// Returns nullopt when no input qualifies. Throws FusionError naming the input and its units when
+// one is not msgs::ShLightUnits::kLinear (face-model, unscaled and unknown units are never averaged
+// raw, and none converts to linear without the face's samples), when the frames differ (naming
+// both), or when an input fails ShLight::Validate (msgs::MessageError).
 std::optional<msgs::ShLight> FuseLights(std::span<const FusionInput> inputs,
                                         const FusionOptions& options = {});
 

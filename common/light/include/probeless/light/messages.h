@@ -62,7 +62,7 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
 
 // Fills `out` (header left to the caller) with the white light of `e`: every channel gets the
 // same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,
-// confidence.
+// confidence; units msgs::ShLightUnits::kLinear (the estimate is in the image's linear units).
 void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale = 1.0f);
 
 // Writes the one-bounce indirect buffer of `result` (TransferResult::indirect, eq. 10-12: linear

@@ -38,9 +38,11 @@ struct SimFrame {
   raytrace::Camera camera;         // intrinsics and pose (camera -> world) at time_s
   raytrace::Frame render;          // the noiseless render
   std::vector<uint8_t> rgb;        // rgb8 (sRGB) after exposure and colour noise
+  double exposure = 1;             // the factor rgb's linear values got (sensor.exposure, auto)
   std::vector<uint16_t> depth_mm;  // depth16 after range, quantisation, noise, holes
-  // Lighting at the camera position in the camera frame (see raytrace::LightingAt); published as
-  // /groundtruth/light.
+  // Lighting at the camera position in the camera frame (see raytrace::LightingAt), in the scene's
+  // radiance; published as /groundtruth/light times `exposure` (msgs::ShLightUnits::kLinear: the
+  // image's units).
   raytrace::LightingGroundTruth light;
   // Lighting at the face origin in the camera frame (scenarios with a face object, else zero): the
   // reference for the face pipeline (not published; docs/sim.md).
