@@ -2,18 +2,21 @@
 // of a 320x240 camera, virtual objects rasterised into it (G_r'), the SSDO of both buffers and
 // eq. 13-15 against analytic references (the cosine-weighted occlusion of a sphere, its hard
 // shadow), real geometry hiding the object, colour bleeding from a red box, bytes outside the
-// change kept exactly, and the boundary errors.
+// change kept exactly, face mode's G_r from the proxy head, and the boundary errors.
 #include "probeless/render/differential.h"
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <vector>
 
+#include "probeless/prt/demo_objects.h"
 #include "probeless/prt/prt.h"
 #include "probeless/raytrace/mesh.h"
 #include "probeless/raytrace/render.h"
+#include "probeless/render/msgs_io.h"
 #include "probeless/sh/sh.h"
 #include "probeless/testing/testing.h"
 
@@ -440,6 +443,90 @@ TEST(Placement, RestsOnTheSurfaceSeenAtThePixel) {
             "object_pixel [400, 10] is outside the 320x240 image");
 }
 
+// Face mode (no reconstruction): G_r is the proxy head rasterised at the head pose (frontal, 0.6 m
+// away). A sphere between a lamp on the right and the right cheek darkens the cheek in its shadow
+// and not the left cheek; a sphere behind the head has no pixel in G_r' (the head hides it; the
+// renderer passes the head's depth to the GL pass as real_depth).
+TEST(FaceMode, ASphereBesideTheFaceShadowsItAndTheHeadHidesOneBehind) {
+  const raytrace::Mesh head = prt::ProxyHead(48);
+  const light::Intrinsics k{300, 300, 159.5, 119.5};
+  const raytrace::Transform face_to_camera = At(0, 0, 0.6);
+  const std::vector<uint8_t> camera(3 * kW * kH, 180);
+  render::VirtualGeometry g_r;
+  render::RasteriseHead(head, face_to_camera, k, kW, kH, camera, &g_r);
+  EXPECT_TRUE(g_r.footprint.empty());
+  EXPECT_EQ(g_r.depth[0], 0.0f);  // no surface beside the head
+  // The camera-frame surface point seen at the face-frame point (x, y) of the cheek.
+  auto surface = [&](double x, double y) {
+    const int u = static_cast<int>(std::lround(k.cx + k.fx * x / 0.6));
+    const int v = static_cast<int>(std::lround(k.cy + k.fy * y / 0.6));
+    const size_t p = static_cast<size_t>(v) * kW + u;
+    const float z = g_r.depth[p];
+    return std::array<double, 4>{(u - k.cx) * z / k.fx, (v - k.cy) * z / k.fy, z,
+                                 static_cast<double>(p)};
+  };
+  const auto right = surface(0.045, 0.035), left = surface(-0.045, 0.035);
+  ASSERT_GT(right[2], 0.55);
+  ASSERT_LT(right[2], 0.7);
+  ASSERT_GT(left[2], 0.55);
+  EXPECT_EQ(g_r.colour[3 * static_cast<size_t>(right[3])], 180);  // the observed colour
+  EXPECT_EQ(g_r.object_id[static_cast<size_t>(right[3])], 0);     // real
+
+  const sh::Vec3 d{0.6, 0, -0.8};  // towards the lamp: right of and in front of the face
+  const raytrace::Mesh sphere = raytrace::MakeSphere(0.03f, 48);
+  render::RasterObject o{&sphere,
+                         At(right[0] + 0.055 * d[0], right[1], right[2] + 0.055 * d[2]),
+                         {0.7f, 0.7f, 0.7f},
+                         true};
+  render::VirtualGeometry g;
+  render::RasteriseObjects(g_r.View(k), {&o, 1}, &g);
+  ASSERT_FALSE(g.footprint.empty());
+  ASSERT_EQ(g.object_id[static_cast<size_t>(right[3])], 0);  // the cheek point stays visible
+  render::DifferentialOptions options;
+  options.transfer.radius_m = 0.1f;  // the renderer's face-mode default
+  options.transfer.max_occluder_distance_m = 0.2f;
+  render::DifferentialRenderer renderer(options);
+  render::DifferentialFrame f;
+  f.real = g_r.View(k);
+  f.with_virtual = &g;
+  f.light = Light(0.1, d, 3.0);
+  f.camera_tone = {render::ToneOperator::kClamp, 1, 4};
+  render::DifferentialResult r;
+  renderer.Compute(f, &r);
+  auto mean_darkening = [&](size_t p) {
+    double sum = 0;
+    int n = 0;
+    for (int dv = -3; dv <= 3; ++dv) {
+      for (int du = -3; du <= 3; ++du) {
+        sum += 1 - Factor(r, p + static_cast<size_t>(dv * kW + du));
+        ++n;
+      }
+    }
+    return sum / n;
+  };
+  const double shadowed = mean_darkening(static_cast<size_t>(right[3]));
+  const double other = mean_darkening(static_cast<size_t>(left[3]));
+  EXPECT_GT(shadowed, 0.3) << "the right cheek, in the sphere's shadow";
+  EXPECT_LT(other, 0.02) << "the left cheek";
+  // The composite's pixels there are darker (eq. 13 on the camera bytes).
+  std::vector<uint8_t> composite = camera;
+  render::ApplyDifferential(r, kW, kH, composite);
+  EXPECT_LT(composite[3 * static_cast<size_t>(right[3])], 170);
+  EXPECT_EQ(composite[3 * static_cast<size_t>(left[3])], 180);
+
+  // Behind the head (face-frame z = 0.25 m, the head ends before): hidden in G_r', visible without
+  // the head.
+  const raytrace::Mesh behind = raytrace::MakeSphere(0.04f, 32);
+  render::RasterObject b{&behind, face_to_camera * At(0, 0, 0.25), {0.7f, 0.7f, 0.7f}, true};
+  render::RasteriseObjects(g_r.View(k), {&b, 1}, &g);
+  EXPECT_TRUE(g.footprint.empty());
+  renderer.Compute({g_r.View(k), &g, f.light, {}, f.camera_tone, {}}, &r);
+  EXPECT_TRUE(r.window.empty());
+  const std::vector<float> none(kW * kH, 0), no_normals(3 * kW * kH, 0);
+  render::RasteriseObjects({kW, kH, k, none, no_normals, {}}, {&b, 1}, &g);
+  EXPECT_FALSE(g.footprint.empty());
+}
+
 TEST(Differential, Errors) {
   const Wall wall;
   render::VirtualGeometry g;
@@ -469,6 +556,25 @@ TEST(Differential, Errors) {
   std::vector<uint8_t> small(10);
   EXPECT_EQ(ErrorOf([&] { render::ApplyDifferential(r, kW, kH, small); }),
             "render::ApplyDifferential: camera image has 10 bytes, expected 3 x 320x240");
+  EXPECT_EQ(ErrorOf([&] {
+              render::RasteriseHead(raytrace::MakeSphere(0.1f, 8), At(0, 0, 1), wall.k, kW, kH,
+                                    small, &g);
+            }),
+            "render::RasteriseHead: camera image of 10 bytes, expected 230400 (320x240 rgb8)");
+  EXPECT_EQ(ErrorOf([&] { render::RasteriseHead(bare, At(0, 0, 1), wall.k, kW, kH, {}, &g); }),
+            "render::RasteriseHead: render::RasteriseObjects: objects[0]: the mesh needs one "
+            "normal per vertex");
+  // The renderer's light units (render/msgs_io.h): linear used, face-model refused with a reason.
+  std::string why;
+  EXPECT_TRUE(render::AcceptLightUnits(msgs::ShLightUnits::kLinear, &why));
+  EXPECT_EQ(why, "");
+  EXPECT_TRUE(render::AcceptLightUnits(msgs::ShLightUnits::kUnknown, &why));
+  EXPECT_EQ(why,
+            "light has unknown units (recorded before ShLight had a units field): shaded as linear "
+            "radiance");
+  EXPECT_FALSE(render::AcceptLightUnits(msgs::ShLightUnits::kFaceModel, &why));
+  EXPECT_FALSE(render::AcceptLightUnits(static_cast<msgs::ShLightUnits>(7), &why));
+  EXPECT_EQ(why, "light has units 7, not a msgs::ShLightUnits value: not rendered");
 }
 
 }  // namespace

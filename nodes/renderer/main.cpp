@@ -4,7 +4,8 @@
 //   renderer [--ros-args -p mode:=face -p objects:="[nose, glasses]" -p backend:=window ...]
 //
 // Subscribes (relative names, remap in launch files): camera/image (Image rgb8/bgr8/mono8),
-// camera/camera_info (CameraInfo), light (ShLight, camera frame; /face/light or /scene/light),
+// camera/camera_info (CameraInfo), light (ShLight, camera frame; /face/light or /scene/light;
+// linear units: face_model lights are refused, unknown / linear_unscaled ones used with a warning),
 // face/observation (FaceObservation: head pose, samples for the viewer), scene/pose (Pose, camera
 // -> world), scene/gbuffer (GeometryBuffer: the real depth G_r hides virtual fragments),
 // scene/transfer and scene/transfer_virtual (TransferBuffer: per-pixel real-only and real+virtual
@@ -15,15 +16,18 @@
 // (-> G_r'), computes the SSDO transfer of both buffers in the objects' window and applies Gruber
 // eq. 13-15 to the camera image (render/differential.h), so the objects shadow whatever real
 // surface fusion reconstructed and tint it by their bounce light; shadow_source mesh keeps the
-// older receiver from scene_mesh instead.
+// older receiver from scene_mesh instead. Face mode does the same with shadow_source gbuffer, G_r
+// being the proxy head rasterised at the head pose (its depth also hides objects behind the head).
 //
 // Params: mode (face | scene), objects (list: nose, cap, glasses, *.prt, *.obj, *.ply),
 // object_scale (1: scale about each object's bounding-box centre), object_position ([] = as
 // modelled, else [x, y, z] m in the anchor frame, where that centre goes; scene mode: the world
-// frame of scene/pose), scene_mesh, shadows (bool: virtual shadows on the proxy head / scene mesh),
+// frame of scene/pose), scene_mesh, shadows (bool: the objects' shadows on the real scene),
 // samples, bands, backend (offscreen | window), trigger (light | image: what starts a frame), tone
 // (clamp | reinhard), exposure, white, video (file), video_fps, png_dir, max_frames (0 =
-// unlimited), shadow_source (gbuffer | mesh), ssdo_radius, ssdo_directions, ssdo_bands, ssdo_seed,
+// unlimited), shadow_source (gbuffer: from G_r, the default in scene mode; face mode: the proxy
+// head rasterised at the head pose | mesh: the baked receiver, face mode's default), ssdo_radius
+// (0.3 m scene, 0.1 m face), ssdo_directions, ssdo_bands, ssdo_seed,
 // ssdo_threads, differential_step, differential_smooth, differential_tone (ratio | fixed | key),
 // differential_key, indirect,
 // object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there). Exit: 0 on
@@ -42,6 +46,7 @@
 
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
+#include "probeless/prt/demo_objects.h"
 #include "probeless/render/content.h"
 #include "probeless/render/differential.h"
 #include "probeless/render/msgs_io.h"
@@ -97,17 +102,23 @@ int Run(int argc, char** argv) {
   }
   content_options.scene_mesh = node.Param("scene_mesh", "");
   const bool shadows = node.Param("shadows", true);
-  const std::string shadow_source = node.Param("shadow_source", "gbuffer");
+  // Face mode keeps the ray-traced proxy-head receiver unless asked for G_r'.
+  const std::string shadow_source =
+      node.Param("shadow_source", mode == "face" ? "mesh" : "gbuffer");
   if (shadow_source != "gbuffer" && shadow_source != "mesh") {
     throw render::RenderError("param shadow_source: expected gbuffer or mesh, got '" +
                               shadow_source + "'");
   }
-  // Scene mode: the objects' shadows and bounce light from G_r (no receiver mesh; scene_mesh then
-  // only occludes the bake), unless shadow_source mesh asks for the receiver.
-  const bool gbuffer_differential = shadows && mode == "scene" && shadow_source == "gbuffer";
+  // The objects' shadows and bounce light from G_r (no receiver mesh; scene_mesh then only
+  // occludes the bake): scene mode from fusion's G_r, face mode from the proxy head rasterised at
+  // the head pose; shadow_source mesh asks for the baked receiver instead.
+  const bool gbuffer_differential = shadows && shadow_source == "gbuffer";
+  const bool face_differential = gbuffer_differential && mode == "face";
   content_options.receiver = shadows && !gbuffer_differential;
   render::DifferentialOptions diff_options;
-  diff_options.transfer.radius_m = static_cast<float>(node.Param("ssdo_radius", 0.3));
+  // The face is ~0.2 m across: a scene-sized radius would reach past it.
+  diff_options.transfer.radius_m =
+      static_cast<float>(node.Param("ssdo_radius", mode == "face" ? 0.1 : 0.3));
   diff_options.transfer.max_occluder_distance_m = 2 * diff_options.transfer.radius_m;
   diff_options.transfer.directions = node.Param("ssdo_directions", 32);
   diff_options.transfer.bands = node.Param("ssdo_bands", 4);
@@ -125,9 +136,10 @@ int Run(int argc, char** argv) {
                                              : render::DifferentialTone::kFixed;
   diff_options.key = static_cast<float>(node.Param("differential_key", 0.18));
   diff_options.indirect = node.Param("indirect", true);
-  // A bake with scene_mesh as occluder already has the real scene's shadows on the objects.
+  // A bake with scene_mesh (scene mode) or the proxy head (face mode) as occluder already has the
+  // real scene's shadows on the objects.
   diff_options.virtual_occlusion =
-      node.Param("virtual_occlusion", content_options.scene_mesh.empty());
+      node.Param("virtual_occlusion", mode == "scene" && content_options.scene_mesh.empty());
   diff_options.virtual_bounce = node.Param("virtual_bounce", true);
   const std::vector<double> object_pixel = node.Param("object_pixel", std::vector<double>{});
   if (!object_pixel.empty() && (object_pixel.size() != 2 || mode != "scene")) {
@@ -163,6 +175,9 @@ int Run(int argc, char** argv) {
   if (gbuffer_differential) differential.emplace(diff_options);  // throws for bad options
   for (size_t i = 0; i < content.objects.size(); ++i) renderer.AddObject(content.objects[i]);
   if (content.receiver) renderer.AddReceiver(*content.receiver);
+  // Face mode G_r: the proxy head the objects were baked against.
+  const raytrace::Mesh head_mesh =
+      face_differential ? prt::ProxyHead(content_options.head_resolution) : raytrace::Mesh{};
   node.Info()
       << "GL " << renderer.gl_version() << " (" << renderer.gl_renderer() << "), "
       << content.objects.size() << " objects" << (content.receiver ? " + shadow receiver" : "")
@@ -200,11 +215,12 @@ int Run(int argc, char** argv) {
   // The objects' placement (object_pixel moves them once, at the first frame with G_r).
   std::vector<raytrace::Transform> placement(content.objects.size());
   bool placed = object_pixel.empty();
-  render::VirtualGeometry with_virtual;
+  render::VirtualGeometry with_virtual, head_geometry;
   render::DifferentialResult diff_result;
   double diff_ms_sum = 0, diff_changed_sum = 0;
   int64_t diff_frames = 0;
   bool warned_size = false, warned_hit = false;
+  std::optional<msgs::ShLightUnits> warned_units;  // one warning per change of units
   int transfer_count = 0;
   render::Composite composite;
   render::ViewerState viewer;
@@ -246,18 +262,30 @@ int Run(int argc, char** argv) {
         warned_hit = true;
       }
     }
-    if (differential && placed && have_gbuffer) {
-      // Gruber §5.4 from the reconstruction: G_r' -> R_d, R'_d (R_i, R'_i) -> eq. 13-15.
-      const light::Intrinsics k{in.camera.fx, in.camera.fy, in.camera.cx, in.camera.cy};
+    // Gruber §5.4: G_r' -> R_d, R'_d (R_i, R'_i) -> eq. 13-15, from the reconstruction (scene
+    // mode) or the head at its pose (face mode).
+    const light::Intrinsics k{in.camera.fx, in.camera.fy, in.camera.cx, in.camera.cy};
+    std::optional<light::GeometryView> real_view;
+    raytrace::Transform anchor_to_camera;
+    if (differential && face_differential && in.face_valid) {
+      render::RasteriseHead(head_mesh, in.face_to_camera, k, width, height, camera_rgb,
+                            &head_geometry);
+      real_view = head_geometry.View(k);
+      anchor_to_camera = in.face_to_camera;
+      in.real_depth = head_geometry.depth;  // the head hides the objects behind it
+    } else if (differential && !face_differential && placed && have_gbuffer) {
       const std::span<const uint8_t> colour = real_colour.size() == 3 * real_depth.size()
                                                   ? std::span<const uint8_t>(real_colour)
                                                   : std::span<const uint8_t>();
-      const light::GeometryView g{width, height, k, real_depth, real_normals, colour};
-      const raytrace::Transform world_to_camera = in.camera_to_world.Inverse();
+      real_view = light::GeometryView{width, height, k, real_depth, real_normals, colour};
+      anchor_to_camera = in.camera_to_world.Inverse();
+    }
+    if (real_view) {
+      const light::GeometryView& g = *real_view;
       std::vector<render::RasterObject> raster;
       for (size_t i = 0; i < content.objects.size(); ++i) {
         const render::VirtualObject& o = content.objects[i];
-        raster.push_back({&o.mesh.mesh, world_to_camera * placement[i] * o.object_to_anchor,
+        raster.push_back({&o.mesh.mesh, anchor_to_camera * placement[i] * o.object_to_anchor,
                           o.albedo, o.cull_back_faces});
       }
       render::RasteriseObjects(g, raster, &with_virtual);
@@ -285,7 +313,8 @@ int Run(int argc, char** argv) {
                    << diff_result.window.height() << ", " << diff_result.changed_pixels
                    << " pixels changed, smallest factor " << diff_result.min_factor << ", "
                    << diff_result.ms_total << " ms";
-    } else if (differential && !have_gbuffer && !real_depth.empty() && !warned_size) {
+    } else if (differential && !face_differential && !have_gbuffer && !real_depth.empty() &&
+               !warned_size) {
       node.Warn() << "scene/gbuffer is not the camera image's size (or has no normals): no "
                      "shadows from G_r for such frames";
       warned_size = true;
@@ -374,7 +403,15 @@ int Run(int argc, char** argv) {
   // pose, scene pose and G_r are published before the light computed from them, so with
   // trigger=light a frame is drawn with its own inputs even when the node wakes late.
   handlers.push_back({&light_sub, [&](bus::Sample&& s) {
-                        light_msg = *msgs::ReadMessage<msgs::ShLight>(s.data());
+                        const msgs::ShLight m = *msgs::ReadMessage<msgs::ShLight>(s.data());
+                        std::string why;
+                        const bool usable = render::AcceptLightUnits(m.units, &why);
+                        if (!why.empty() && warned_units != m.units) {
+                          node.Warn() << why;
+                          warned_units = m.units;
+                        }
+                        if (!usable) return;  // keeps the last linear light, if any
+                        light_msg = m;
                         light = render::LightFromMsg(light_msg);
                         have_light = true;
                         if (trigger == "light") render_frame();

@@ -1,6 +1,7 @@
 // The renderer node end to end (label render): publishes a camera image, a face observation and an
 // SH light on the bus, runs build/bin/renderer (OSMesa) and checks the published composite; the
-// node's bad-parameter and missing-mesh errors; prt_bake's output file and its errors.
+// node's bad-parameter and missing-mesh errors; a face-model light refused; prt_bake's output file
+// and its errors.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -9,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
@@ -16,6 +18,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/prt/prt.h"
+#include "probeless/testing/testing.h"
 
 namespace probeless {
 namespace {
@@ -32,8 +35,10 @@ int RunCommand(const std::string& command, std::string* output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-// Runs the node for one frame (offscreen, or in a GLFW window under xvfb-run -a) and checks it.
-void PublishesCompositeForLight(bool window) {
+// Runs the node for one frame (offscreen, or in a GLFW window under xvfb-run -a) and checks it;
+// face_gbuffer: face mode's differential rendering from the proxy head's G_r (shadow_source
+// gbuffer) instead of the baked receiver.
+void PublishesCompositeForLight(bool window, bool face_gbuffer = false) {
   constexpr uint32_t kW = 160, kH = 120;
   bus::PublisherOptions image_options;
   image_options.max_message_bytes = msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8);
@@ -60,7 +65,8 @@ void PublishesCompositeForLight(bool window) {
              nullptr);
     } else {
       execl(bin.c_str(), bin.c_str(), "--ros-args", "-p", "objects:=[nose]", "-p", "samples:=16",
-            "-p", "max_frames:=1", "-p", "tone:=clamp", nullptr);
+            "-p", "max_frames:=1", "-p", "tone:=clamp", "-p",
+            face_gbuffer ? "shadow_source:=gbuffer" : "shadow_source:=mesh", nullptr);
     }
     _exit(127);
   }
@@ -116,11 +122,60 @@ void PublishesCompositeForLight(bool window) {
 
 TEST(RenderNodeTest, PublishesCompositeForLight) { PublishesCompositeForLight(false); }
 
+TEST(RenderNodeTest, FaceModeFromTheHeadsGeometryBuffer) {
+  PublishesCompositeForLight(false, true);
+}
+
 TEST(RenderNodeTest, WindowBackendUnderXvfb) {
   if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0) {
     GTEST_SKIP() << "xvfb-run is missing (apt-get install xvfb): window test skipped";
   }
   PublishesCompositeForLight(true);
+}
+
+// A light in face-model units is not rendered (one warning); the next linear light is.
+TEST(RenderNodeTest, FaceModelUnitsAreRefused) {
+  using namespace std::chrono_literals;
+  constexpr uint32_t kW = 160, kH = 120;
+  bus::PublisherOptions image_options;
+  image_options.max_message_bytes = msgs::Image::MessageBytesFor(kW, kH, msgs::Encoding::kRgb8);
+  image_options.history = 1;
+  bus::Publisher image_pub("/units/image", msgs::TopicTypeOf<msgs::Image>(), image_options);
+  bus::Publisher light_pub("/units/light", msgs::TopicTypeOf<msgs::ShLight>(),
+                           {.max_message_bytes = sizeof(msgs::ShLight)});
+  bus::Subscriber composite_sub("/units/composite", msgs::TopicTypeOf<msgs::Image>(),
+                                {.queue_depth = 4});
+  probeless::testing::Process node(
+      "renderer", {"--ros-args", "-r", "camera/image:=/units/image", "-r", "light:=/units/light",
+                   "-r", "render/composite:=/units/composite", "-p", "objects:=[nose]", "-p",
+                   "samples:=16", "-p", "max_frames:=1", "-p", "shadows:=false"});
+  for (int i = 0; i < 3000 && light_pub.SubscriberCount() == 0; ++i) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_GT(light_pub.SubscriberCount(), 0u) << node.Err();
+  {
+    bus::Loan loan = image_pub.Borrow(image_options.max_message_bytes);
+    auto m = msgs::WriteMessage<msgs::Image>(loan.data());
+    m->Init(kW, kH, msgs::Encoding::kRgb8);
+    std::memset(m.payload.data(), 90, m->PayloadBytes());
+    image_pub.Publish(std::move(loan));
+  }
+  std::this_thread::sleep_for(200ms);
+  msgs::ShLight light;
+  light.bands = 3;
+  light.coefficients[0][0] = light.coefficients[0][1] = light.coefficients[0][2] = 3.0f;
+  light.units = msgs::ShLightUnits::kFaceModel;
+  light_pub.PublishCopy(std::as_bytes(std::span(&light, 1)));
+  EXPECT_FALSE(composite_sub.Take(1500ms));
+  light.units = msgs::ShLightUnits::kLinear;
+  light_pub.PublishCopy(std::as_bytes(std::span(&light, 1)));
+  EXPECT_TRUE(composite_sub.Take(30s)) << node.Err();
+  EXPECT_EQ(node.Wait(30s), 0) << node.Err();
+  EXPECT_NE(node.Err().find("light is in face_model units (a face model's compressed I^g, not "
+                            "radiance): not rendered; publish linear light (face_light "
+                            "linear_output:=true)"),
+            std::string::npos)
+      << node.Err();
 }
 
 TEST(RenderNodeTest, BadParamsAndMissingMeshFail) {

@@ -156,6 +156,39 @@ void RasteriseObjects(const light::GeometryView& real, std::span<const RasterObj
   }
 }
 
+void RasteriseHead(const raytrace::Mesh& head, const raytrace::Transform& face_to_camera,
+                   const light::Intrinsics& k, int width, int height,
+                   std::span<const uint8_t> camera_rgb, VirtualGeometry* out) {
+  if (width < 1 || width > 8192 || height < 1 || height > 8192) {
+    throw RenderError("render::RasteriseHead: size " + std::to_string(width) + "x" +
+                      std::to_string(height) + " outside 1..8192");
+  }
+  const size_t pixels = static_cast<size_t>(width) * height;
+  if (!camera_rgb.empty() && camera_rgb.size() != 3 * pixels) {
+    throw RenderError("render::RasteriseHead: camera image of " +
+                      std::to_string(camera_rgb.size()) + " bytes, expected " +
+                      std::to_string(3 * pixels) + " (" + std::to_string(width) + "x" +
+                      std::to_string(height) + " rgb8)");
+  }
+  // An empty G_r (no surface anywhere), then the head as the only "object".
+  const std::vector<float> empty_depth(pixels, 0), empty_normals(3 * pixels, 0);
+  const light::GeometryView empty{width, height, k, empty_depth, empty_normals, {}};
+  const RasterObject o{&head, face_to_camera, {1, 1, 1}, false};
+  try {
+    RasteriseObjects(empty, {&o, 1}, out);
+  } catch (const RenderError& e) {
+    throw RenderError(std::string("render::RasteriseHead: ") + e.what());
+  }
+  for (size_t q = 0; q < pixels; ++q) {
+    if (out->object_id[q] != 0 && !camera_rgb.empty()) {
+      for (int j = 0; j < 3; ++j) out->colour[3 * q + j] = camera_rgb[3 * q + j];
+    }
+    out->object_id[q] = 0;
+  }
+  out->footprint = {};
+  out->min_virtual_depth = 0;
+}
+
 light::PixelRect DifferentialWindow(const VirtualGeometry& g, const light::Intrinsics& k,
                                     const light::TransferOptions& options) {
   if (g.footprint.empty()) return {};

@@ -19,6 +19,32 @@ ShLightRgb LightFromMsg(const msgs::ShLight& light) {
   return out;
 }
 
+bool AcceptLightUnits(msgs::ShLightUnits units, std::string* warning) {
+  warning->clear();
+  switch (units) {
+    case msgs::ShLightUnits::kLinear:
+      return true;
+    case msgs::ShLightUnits::kUnknown:
+      *warning =
+          "light has unknown units (recorded before ShLight had a units field): shaded as "
+          "linear radiance";
+      return true;
+    case msgs::ShLightUnits::kLinearUnscaled:
+      *warning =
+          "light is linear_unscaled (its scale is arbitrary): shaded as linear radiance, "
+          "the objects' brightness will not match the image";
+      return true;
+    case msgs::ShLightUnits::kFaceModel:
+      *warning =
+          "light is in face_model units (a face model's compressed I^g, not radiance): not "
+          "rendered; publish linear light (face_light linear_output:=true)";
+      return false;
+  }
+  *warning = "light has units " + std::to_string(static_cast<uint32_t>(units)) +
+             ", not a msgs::ShLightUnits value: not rendered";
+  return false;
+}
+
 raytrace::Transform TransformFromMsg(const msgs::RigidTransform& t) {
   const msgs::Quaternion& q = t.rotation;
   const double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);

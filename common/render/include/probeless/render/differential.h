@@ -67,6 +67,18 @@ struct VirtualGeometry {
 void RasteriseObjects(const light::GeometryView& real, std::span<const RasterObject> objects,
                       VirtualGeometry* out);
 
+// G_r of a face for face-mode differential rendering (no reconstruction there): `head` (the face
+// frame of msgs::FaceObservation, e.g. prt::ProxyHead; unit normals) placed by `face_to_camera`
+// and rasterised (no back-face culling) into an empty width x height buffer, with the camera
+// image's sRGB colour at its pixels (the observed colour, as fusion's G_r has; 255 where
+// `camera_rgb` is empty). All pixels are real (object_id 0, empty footprint); out->View(k) is the
+// `real` of a DifferentialFrame and its depth hides virtual fragments behind the head. Throws
+// RenderError for a mesh without normals, a camera image that is not width x height x 3 bytes or
+// a size outside 1..8192.
+void RasteriseHead(const raytrace::Mesh& head, const raytrace::Transform& face_to_camera,
+                   const light::Intrinsics& k, int width, int height,
+                   std::span<const uint8_t> camera_rgb, VirtualGeometry* out);
+
 // The tone mapper T of eq. 13.
 enum class DifferentialTone {
   // The camera's response as the virtual objects get it (ToneMapping: exposure e, clamp or

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "probeless/msgs/camera_info.h"
@@ -17,6 +18,11 @@ namespace probeless::render {
 
 // The light's RGB coefficients. Throws RenderError if the message fails ShLight::Validate.
 ShLightRgb LightFromMsg(const msgs::ShLight& light);
+// Whether the renderer shades with a light of `units` (it needs linear radiance in the camera's
+// units): kLinear yes; kUnknown (a message recorded before the units field) and kLinearUnscaled
+// yes, taken as linear, with `*warning` set to one line saying so; kFaceModel (and any other
+// value) no, `*warning` saying why. `*warning` is cleared for kLinear.
+bool AcceptLightUnits(msgs::ShLightUnits units, std::string* warning);
 // A rigid transform (unit quaternion w, x, y, z). Throws RenderError for a zero quaternion.
 raytrace::Transform TransformFromMsg(const msgs::RigidTransform& transform);
 // Intrinsics of a calibration (distortion ignored). Throws RenderError for invalid values.
