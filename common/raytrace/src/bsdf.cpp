@@ -50,9 +50,10 @@ Vec3 SampleVisibleNormal(Vec3 wo, float alpha, float u1, float u2) {
   const Vec3 t1 = len2 > 0 ? Vec3{-v.y, v.x, 0} / std::sqrt(len2) : Vec3{1, 0, 0};
   const Vec3 t2 = Cross(v, t1);
   const float r = std::sqrt(u1);
-  const float phi = 2 * kPi * u2;
-  const float p1 = r * std::cos(phi);
-  float p2 = r * std::sin(phi);
+  float sin_phi, cos_phi;
+  SinCos2Pi(u2, &sin_phi, &cos_phi);
+  const float p1 = r * cos_phi;
+  float p2 = r * sin_phi;
   const float s = 0.5f * (1 + v.z);
   p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * p2;
   const Vec3 nh = t1 * p1 + t2 * p2 + v * std::sqrt(std::max(0.0f, 1 - p1 * p1 - p2 * p2));
@@ -120,15 +121,6 @@ void GridPosition(float x, int* i, float* w) {
 }
 
 }  // namespace
-
-Frame3::Frame3(Vec3 normal) : n(normal) {
-  // Branchless orthonormal basis (Duff et al. 2017): continuous except at n.z = -0.
-  const float sign = std::copysign(1.0f, n.z);
-  const float a = -1 / (sign + n.z);
-  const float c = n.x * n.y * a;
-  t = {1 + sign * n.x * n.x * a, sign * c, -sign * n.x};
-  b = {c, sign + n.y * n.y * a, -n.y};
-}
 
 float GgxAlbedo(float mu, float roughness, float f0) {
   const AlbedoTables& tab = Tables();
@@ -205,10 +197,19 @@ bool Bsdf::Sample(float u_lobe, float u1, float u2, Vec3* wi_world, Vec3* weight
   } else {
     // Cosine-weighted hemisphere (concentric-free polar map: fine for a path tracer).
     const float r = std::sqrt(u1);
-    const float phi = 2 * kPi * u2;
-    wi = {r * std::cos(phi), r * std::sin(phi), std::sqrt(std::max(0.0f, 1 - u1))};
+    float sin_phi, cos_phi;
+    SinCos2Pi(u2, &sin_phi, &cos_phi);
+    wi = {r * cos_phi, r * sin_phi, std::sqrt(std::max(0.0f, 1 - u1))};
   }
   if (wi.z <= 0) return false;
+  if (f0_ <= 0) {
+    // Pure Lambert: f cos / pdf is the albedo itself.
+    *pdf = wi.z * (1 / kPi);
+    if (!(*pdf > 0)) return false;
+    *wi_world = Unit(frame_.ToWorld(wi));
+    *weight = albedo_;
+    return true;
+  }
   const Vec3 f = EvalLocal(wi, pdf);
   if (!(*pdf > 0)) return false;
   *wi_world = Unit(frame_.ToWorld(wi));

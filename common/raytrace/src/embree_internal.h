@@ -13,7 +13,7 @@ namespace probeless::raytrace::internal {
 void ToEmbree(const Ray& r, RTCRay& out);
 // rtcIntersect1M over `count` rays (hits reset first); `coherent` for camera rays.
 void IntersectStream(RTCScene scene, RTCRayHit* rays, size_t count, bool coherent);
-// rtcOccluded1M over `count` rays: an occluded ray gets tfar = -inf.
-void OccludedStream(RTCScene scene, RTCRay* rays, size_t count);
+// rtcOccluded1M over `count` rays, `stride` bytes apart: an occluded ray gets tfar = -inf.
+void OccludedStream(RTCScene scene, RTCRay* rays, size_t count, size_t stride = sizeof(RTCRay));
 
 }  // namespace probeless::raytrace::internal

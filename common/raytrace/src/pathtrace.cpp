@@ -75,13 +75,17 @@ struct Rng {
     z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
     return z ^ (z >> 31);
   }
+  // 24 bits to [0, 1), through int32: an unsigned 64-bit conversion costs a branchy sequence.
+  static float Unit24(uint64_t bits) {
+    return static_cast<float>(static_cast<int32_t>(bits)) * (1.0f / 16777216.0f);
+  }
   // One uniform in [0, 1) (24 bits).
-  float Next() { return static_cast<float>(Bits() >> 40) * (1.0f / 16777216.0f); }
+  float Next() { return Unit24(Bits() >> 40); }
   // Two uniforms in [0, 1) from one draw (24 bits each): half the hashing per dimension.
   void Next2(float* a, float* b) {
     const uint64_t z = Bits();
-    *a = static_cast<float>(z >> 40) * (1.0f / 16777216.0f);
-    *b = static_cast<float>((z >> 8) & 0xFFFFFF) * (1.0f / 16777216.0f);
+    *a = Unit24(z >> 40);
+    *b = Unit24((z >> 8) & 0xFFFFFF);
   }
 };
 
@@ -192,7 +196,8 @@ bool IsArea(const Light& l) {
 }
 
 // Ray parameter of the nearest hit of (o, d) with area light `l` in (t_min, t_max), or kInf.
-float IntersectArea(const Light& l, Vec3 o, Vec3 d, float t_min, float t_max, bool* front) {
+[[gnu::always_inline]] inline float IntersectArea(const Light& l, Vec3 o, Vec3 d, float t_min,
+                                                  float t_max, bool* front) {
   if (l.kind == Light::Kind::kRectangle) {
     const float denom = Dot(d, l.normal);
     if (denom == 0) return kInf;
@@ -243,7 +248,7 @@ std::vector<int> AreaIndices(const std::vector<Light>& lights) {
 
 // The unshadowed-contribution estimate used to choose one light per vertex: > 0 wherever the light
 // can contribute at (p, n), 0 only where it cannot (so the choice stays unbiased).
-float Importance(const Light& l, Vec3 p, Vec3 n) {
+[[gnu::always_inline]] inline float Importance(const Light& l, Vec3 p, Vec3 n) {
   switch (l.kind) {
     case Light::Kind::kDirectional:
       return l.luminance * std::max(0.0f, Dot(n, l.direction));
@@ -305,17 +310,17 @@ Vec3 SampleCone(Vec3 axis, Vec3 t, Vec3 b, float sin2_max, float cos_max, float 
   const float one_minus_cos = u1 * OneMinusCos(sin2_max, cos_max);
   const float cos_t = 1 - one_minus_cos;
   const float sin_t = std::sqrt(std::max(0.0f, one_minus_cos * (2 - one_minus_cos)));
-  const float phi = 2 * kPi * u2;
-  return Unit(t * (sin_t * std::cos(phi)) + b * (sin_t * std::sin(phi)) + axis * cos_t);
+  float sin_phi, cos_phi;
+  internal::SinCos2Pi(u2, &sin_phi, &cos_phi);
+  return Unit(t * (sin_t * cos_phi) + b * (sin_t * sin_phi) + axis * cos_t);
 }
 
-// One next-event sample: the shadow ray and what it adds when unoccluded.
-struct ShadowSample {
+// One next-event sample: the shadow ray in Embree's layout (streamed with this struct's stride, so
+// there is no conversion pass) and what it adds to its path when unoccluded.
+struct alignas(16) ShadowRay {
+  RTCRay ray;
   Vec3 contribution;
   uint32_t path = 0;
-  // The sampled light, not tested as its own occluder; -1 = test every area light; -2 = none
-  // (the ray was already tested against all area lights).
-  int light = -1;
 };
 
 struct Path {
@@ -332,14 +337,12 @@ struct Path {
 };
 
 // The wavefront buffers, one set per thread and reused between tasks: large fresh vectors would
-// be mapped and page-faulted anew for every tile.
+// be mapped and page-faulted anew for every tile. The ray buffers only grow (no clearing pass).
 struct TracerBuffers {
   std::vector<Path> paths;
   std::vector<uint32_t> active, next_active;
-  std::vector<Ray> next_rays;
-  std::vector<RTCRayHit> stream;
-  std::vector<ShadowSample> shadows;
-  std::vector<RTCRay> shadow_stream;
+  std::vector<RTCRayHit> stream, next_stream;
+  std::vector<ShadowRay> shadows;
   // The callers' per-task inputs and outputs.
   std::vector<Ray> start;
   std::vector<Rng> rngs;
@@ -349,6 +352,22 @@ struct TracerBuffers {
 TracerBuffers& ThreadBuffers() {
   static thread_local TracerBuffers buffers;
   return buffers;
+}
+
+// An Embree ray from o along d up to t_far (t_near 0, mask all, time 0).
+inline void SetRay(RTCRay& r, Vec3 o, Vec3 d, float t_far) {
+  r.org_x = o.x;
+  r.org_y = o.y;
+  r.org_z = o.z;
+  r.tnear = 0;
+  r.dir_x = d.x;
+  r.dir_y = d.y;
+  r.dir_z = d.z;
+  r.time = 0;
+  r.tfar = t_far;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
 }
 
 // The wavefront path tracer of one batch of paths (one thread; no shared mutable state).
@@ -362,14 +381,15 @@ class Tracer {
         area_(AreaIndices(lights)),
         importance_(lights.size()),
         has_emission_(internal::SceneAccess::HasEmission(scene)),
+        has_disc_(std::any_of(lights.begin(), lights.end(),
+                              [](const Light& l) { return l.kind == Light::Kind::kDisc; })),
         b_(ThreadBuffers()),
         paths_(b_.paths),
         active_(b_.active),
         next_active_(b_.next_active),
-        next_rays_(b_.next_rays),
         stream_(b_.stream),
-        shadows_(b_.shadows),
-        shadow_stream_(b_.shadow_stream) {}
+        next_stream_(b_.next_stream),
+        shadows_(b_.shadows) {}
 
   // Traces the paths starting with `start` (unit directions), each with its own random stream;
   // radiance per path into `out` (same order). Returns the number of rays traced.
@@ -380,30 +400,33 @@ class Tracer {
     for (size_t i = 0; i < n; ++i) paths_[i].rng = rngs[i];
     active_.resize(n);
     for (size_t i = 0; i < n; ++i) active_[i] = static_cast<uint32_t>(i);
-    next_rays_ = start;
+    // Each path queues at most one ray and (one light, or all of them) + 1 shadow rays per wave.
+    if (stream_.size() < n) stream_.resize(n);
+    if (next_stream_.size() < n) next_stream_.resize(n);
+    const size_t shadows_per_path = options_.all_lights ? lights_.size() + 1 : 2;
+    if (shadows_.size() < n * shadows_per_path) shadows_.resize(n * shadows_per_path);
+    for (size_t k = 0; k < n; ++k) internal::ToEmbree(start[k], stream_[k].ray);
     uint64_t traced = 0;
     bool coherent = true;  // the first wave: camera rays of neighbouring pixels
     while (!active_.empty()) {
-      stream_.resize(next_rays_.size());
-      for (size_t k = 0; k < next_rays_.size(); ++k)
-        internal::ToEmbree(next_rays_[k], stream_[k].ray);
-      internal::IntersectStream(handle_, stream_.data(), stream_.size(), coherent);
+      const size_t count = active_.size();
+      internal::IntersectStream(handle_, stream_.data(), count, coherent);
       coherent = false;
-      traced += stream_.size();
-      shadows_.clear();
-      shadow_stream_.clear();
+      traced += count;
+      shadow_count_ = 0;
       next_active_.clear();
-      next_rays_.clear();
-      for (size_t k = 0; k < active_.size(); ++k) Shade(active_[k], stream_[k]);
-      if (!shadows_.empty()) {
-        internal::OccludedStream(handle_, shadow_stream_.data(), shadow_stream_.size());
-        traced += shadows_.size();
-        for (size_t i = 0; i < shadows_.size(); ++i) {
-          const bool occluded = std::isinf(shadow_stream_[i].tfar) && shadow_stream_[i].tfar < 0;
-          if (!occluded) paths_[shadows_[i].path].radiance += shadows_[i].contribution;
+      for (size_t k = 0; k < count; ++k) Shade(active_[k], stream_[k]);
+      if (shadow_count_ > 0) {
+        internal::OccludedStream(handle_, &shadows_[0].ray, shadow_count_, sizeof(ShadowRay));
+        traced += shadow_count_;
+        for (size_t i = 0; i < shadow_count_; ++i) {
+          const ShadowRay& s = shadows_[i];
+          const bool occluded = std::isinf(s.ray.tfar) && s.ray.tfar < 0;
+          if (!occluded) paths_[s.path].radiance += s.contribution;
         }
       }
       std::swap(active_, next_active_);
+      std::swap(stream_, next_stream_);
     }
     out.resize(n);
     for (size_t i = 0; i < n; ++i) {
@@ -415,22 +438,25 @@ class Tracer {
   }
 
  private:
-  bool BlockedByAreaLight(const ShadowSample& s, const Ray& r) const {
-    if (s.light == -2) return false;
+  // Does an area light other than `skip` cross the segment o + t d, t in (0, t_far)?
+  bool BlockedByAreaLight(int skip, Vec3 o, Vec3 d, float t_far) const {
     for (const int i : area_) {
-      if (i == s.light) continue;
+      if (i == skip) continue;
       bool front = false;
-      if (IntersectArea(lights_[i], r.origin, r.direction, 0, r.t_far, &front) < kInf) return true;
+      if (IntersectArea(lights_[i], o, d, 0, t_far, &front) < kInf) return true;
     }
     return false;
   }
 
-  // Queues a shadow ray, unless an area light (analytic, not in the BVH) already blocks it.
-  void PushShadow(const Ray& ray, const ShadowSample& s) {
-    if (BlockedByAreaLight(s, ray)) return;
-    shadows_.push_back(s);
-    shadow_stream_.emplace_back();
-    internal::ToEmbree(ray, shadow_stream_.back());
+  // Queues a shadow ray (o, d, up to t_far) adding `contribution` to path `index` if unoccluded,
+  // unless an area light other than `skip` (analytic, not in the BVH) already blocks it; skip = -2:
+  // the ray was already tested against all area lights.
+  void PushShadow(Vec3 o, Vec3 d, float t_far, Vec3 contribution, uint32_t index, int skip) {
+    if (skip != -2 && BlockedByAreaLight(skip, o, d, t_far)) return;
+    ShadowRay& s = shadows_[shadow_count_++];
+    SetRay(s.ray, o, d, t_far);
+    s.contribution = contribution;
+    s.path = index;
   }
 
   // MIS weight of a BSDF-sampled ray reaching light `l` at distance t.
@@ -440,6 +466,23 @@ class Tracer {
     const float select =
         p.prev_light_sum < 0 ? (importance > 0 ? 1.0f : 0.0f) : importance / p.prev_light_sum;
     return PowerHeuristic(p.prev_pdf, select * LightPdf(lights_[l], p.prev_origin, w, t));
+  }
+
+  // Radiance of the environment and the sun discs along an escaping ray d, with the BSDF-side MIS
+  // weights of the discs.
+  Vec3 Sky(const Path& p, Vec3 d) const {
+    Vec3 l;
+    const Environment& env = scene_.environment();
+    if (env.scale != 0) l = ClampNonNegative(internal::EvaluateSh9(env.sh, d)) * env.scale;
+    if (has_disc_) {
+      for (size_t i = 0; i < lights_.size(); ++i) {
+        const Light& disc = lights_[i];
+        if (disc.kind == Light::Kind::kDisc && Dot(d, disc.direction) >= disc.cos_max) {
+          l += disc.power * BsdfSideWeight(p, static_cast<int>(i), d, kInf);
+        }
+      }
+    }
+    return l;
   }
 
   // Radiance (before the path throughput) that the ray (o, d) receives from an area light before
@@ -455,26 +498,18 @@ class Tracer {
     }
     *absorbed = false;
     if (t_geom < kInf) return {};
-    Vec3 l;
-    const Environment& env = scene_.environment();
-    if (env.scale != 0) l = ClampNonNegative(internal::EvaluateSh9(env.sh, d)) * env.scale;
-    for (size_t i = 0; i < lights_.size(); ++i) {
-      const Light& disc = lights_[i];
-      if (disc.kind == Light::Kind::kDisc && Dot(d, disc.direction) >= disc.cos_max) {
-        l += disc.power * BsdfSideWeight(p, static_cast<int>(i), d, kInf);
-      }
-    }
-    return l;
+    return Sky(p, d);
   }
 
   void Shade(uint32_t index, const RTCRayHit& rh) {
     Path& p = paths_[index];
-    Ray ray{{rh.ray.org_x, rh.ray.org_y, rh.ray.org_z}, {rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z}};
+    const Vec3 ray_origin{rh.ray.org_x, rh.ray.org_y, rh.ray.org_z};
+    const Vec3 ray_direction{rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z};
     const bool miss = rh.hit.geomID == RTC_INVALID_GEOMETRY_ID;
     float t_light = kInf;
     bool absorbed = false;
     const Vec3 e =
-        Emitted(p, ray.origin, ray.direction, miss ? kInf : rh.ray.tfar, &t_light, &absorbed);
+        Emitted(p, ray_origin, ray_direction, miss ? kInf : rh.ray.tfar, &t_light, &absorbed);
     p.radiance += p.throughput * e;
     if (miss || absorbed) return;
     Hit hit;
@@ -483,14 +518,14 @@ class Tracer {
     hit.t = rh.ray.tfar;
     hit.u = rh.hit.u;
     hit.v = rh.hit.v;
-    const SurfacePoint s = internal::SceneAccess::Surface(scene_, hit, ray.origin, ray.direction);
+    const SurfacePoint s = internal::SceneAccess::Surface(scene_, hit, ray_origin, ray_direction);
     const Material& m = *s.material;
     if (m.emission.x > 0 || m.emission.y > 0 || m.emission.z > 0) {
       p.radiance += p.throughput * m.emission;
     }
     // A degenerate (zero-area) triangle has no normal to shade with: the path ends there.
     if (p.final || Dot(s.geometric_normal, s.geometric_normal) == 0) return;
-    const Vec3 wo = -ray.direction;
+    const Vec3 wo = -ray_direction;
     // Interpolated normals can face away from the viewer at silhouettes: fall back to the facet.
     const Vec3 n = Dot(s.normal, wo) > 1e-4f ? s.normal : s.geometric_normal;
     const internal::Bsdf bsdf(s.albedo, m.specular_f0, m.roughness, n, wo);
@@ -545,16 +580,15 @@ class Tracer {
     if (p.final && !has_emission_) {
       // The last ray only gathers emitters: without emissive surfaces an occlusion query
       // (up to the nearest area light, or unbounded towards the sky) is enough.
-      float t_light = kInf;
-      bool absorbed = false;
-      const Vec3 e = Emitted(p, origin, wi, kInf, &t_light, &absorbed);
-      if (MaxComponent(e) > 0) {
-        PushShadow(Ray{origin, wi, 0, t_light < kInf ? t_light : 1e30f},
-                   ShadowSample{p.throughput * e, index, -2});
+      float t_final = kInf;
+      bool absorbed_final = false;
+      const Vec3 ef = Emitted(p, origin, wi, kInf, &t_final, &absorbed_final);
+      if (MaxComponent(ef) > 0) {
+        PushShadow(origin, wi, t_final < kInf ? t_final : 1e30f, p.throughput * ef, index, -2);
       }
       return;
     }
-    next_rays_.push_back(Ray{origin, wi, 0, 1e30f});
+    SetRay(next_stream_[next_active_.size()].ray, origin, wi, 1e30f);
     next_active_.push_back(index);
   }
 
@@ -565,22 +599,20 @@ class Tracer {
     Vec3 wi;
     Vec3 incident;        // radiance (area, disc) or irradiance (delta) along wi
     float light_pdf = 0;  // solid angle; 0 = delta light
-    Ray ray;
-    ray.origin = origin;
+    Vec3 direction;       // of the shadow ray (not unit for point and rectangle lights)
+    float t_far = 1e30f;
     switch (l.kind) {
       case Light::Kind::kDirectional:
         wi = l.direction;
         incident = l.power;
-        ray.direction = wi;
-        ray.t_far = 1e30f;
+        direction = wi;
         break;
       case Light::Kind::kDisc:
         wi = SampleCone(l.direction, l.frame_t, l.frame_b, l.sin_max * l.sin_max, l.cos_max, u[1],
                         u[2]);
         incident = l.power;
         light_pdf = 1 / l.solid_angle;
-        ray.direction = wi;
-        ray.t_far = 1e30f;
+        direction = wi;
         break;
       case Light::Kind::kPoint: {
         const Vec3 to = l.position - origin;
@@ -588,8 +620,8 @@ class Tracer {
         const float inv_r2 = 1 / r2;
         wi = to * std::sqrt(inv_r2);
         incident = l.power * inv_r2;
-        ray.direction = to;
-        ray.t_far = 1 - 1e-4f;
+        direction = to;
+        t_far = 1 - 1e-4f;
         break;
       }
       case Light::Kind::kRectangle: {
@@ -602,8 +634,8 @@ class Tracer {
         if (!(cos_l > 0)) return;
         incident = l.power;
         light_pdf = d2 / (l.area * cos_l);
-        ray.direction = to;
-        ray.t_far = 1 - kShadowShorten;
+        direction = to;
+        t_far = 1 - kShadowShorten;
         break;
       }
       case Light::Kind::kSphere: {
@@ -621,8 +653,8 @@ class Tracer {
         if (!(t < kInf)) t = d * cos_max;  // grazing the silhouette: the tangent point
         incident = l.power;
         light_pdf = 1 / (2 * kPi * OneMinusCos(sin2, cos_max));
-        ray.direction = wi;
-        ray.t_far = t * (1 - kShadowShorten);
+        direction = wi;
+        t_far = t * (1 - kShadowShorten);
         break;
       }
     }
@@ -634,8 +666,8 @@ class Tracer {
     if (light_pdf > 0) {
       weight = PowerHeuristic(select * light_pdf, bsdf_pdf) / (select * light_pdf);
     }
-    PushShadow(ray, ShadowSample{p.throughput * f * incident * weight, index,
-                                 IsArea(l) ? static_cast<int>(chosen) : -1});
+    PushShadow(origin, direction, t_far, p.throughput * f * incident * weight, index,
+               IsArea(l) ? static_cast<int>(chosen) : -1);
   }
 
   const Scene& scene_;
@@ -645,14 +677,15 @@ class Tracer {
   const std::vector<int> area_;  // indices of the area lights in lights_
   std::vector<float> importance_;
   bool has_emission_ = false;
+  bool has_disc_ = false;
   TracerBuffers& b_;
   std::vector<Path>& paths_;
   std::vector<uint32_t>& active_;
   std::vector<uint32_t>& next_active_;
-  std::vector<Ray>& next_rays_;
-  std::vector<RTCRayHit>& stream_;
-  std::vector<ShadowSample>& shadows_;
-  std::vector<RTCRay>& shadow_stream_;
+  std::vector<RTCRayHit>& stream_;       // this wave's rays (the first active_.size())
+  std::vector<RTCRayHit>& next_stream_;  // the next wave's, in next_active_ order
+  std::vector<ShadowRay>& shadows_;      // this wave's shadow rays (the first shadow_count_)
+  size_t shadow_count_ = 0;
 };
 
 // Runs fn(task) for every task on `pool` in one dynamic ParallelFor (no barriers between groups:

@@ -386,10 +386,10 @@ void IntersectStream(RTCScene scene, RTCRayHit* rays, size_t count, bool coheren
   rtcIntersect1M(scene, &context, rays, static_cast<unsigned>(count), sizeof(RTCRayHit));
 }
 
-void OccludedStream(RTCScene scene, RTCRay* rays, size_t count) {
+void OccludedStream(RTCScene scene, RTCRay* rays, size_t count, size_t stride) {
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
-  rtcOccluded1M(scene, &context, rays, static_cast<unsigned>(count), sizeof(RTCRay));
+  rtcOccluded1M(scene, &context, rays, static_cast<unsigned>(count), stride);
 }
 
 }  // namespace internal
