@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <iterator>
+#include <vector>
 
 namespace probeless::recon {
 
@@ -85,8 +87,11 @@ constexpr int kTasks = 16;
 // normals' noise variance, which otherwise shows as a constraint in every direction (a floor and
 // a wall seen through Kinect-like noise look as constrained along their intersection as a real
 // kitchen's weakest direction), while piecewise-planar geometry keeps its normals.
-void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, IcpResult& out,
-                          ThreadPool* pool) {
+// `matched` (nullptr: every pixel), one byte per pixel: only pixels with a non-zero byte count, so
+// the matrix describes the part of the frame that found a model surface.
+void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block,
+                          const uint8_t* matched, double normal_equations[21], int* pairs,
+                          float* mean_depth_m, ThreadPool* pool) {
   const int bw = vs.width / block, bh = vs.height / block;
   // Per task in fixed rows of blocks, summed in task order: deterministic for any thread count.
   struct Sum {
@@ -107,6 +112,7 @@ void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, I
           for (int x = bx * block; x < (bx + 1) * block; x += 2) {
             const Vec3f v = vs.At(x, y), nv = ns.At(x, y);
             if (v.z <= 0 || (nv.x == 0 && nv.y == 0 && nv.z == 0)) continue;
+            if (matched != nullptr && matched[static_cast<size_t>(y) * vs.width + x] == 0) continue;
             p = p + v;
             n = n + nv;
             ++count;
@@ -124,15 +130,15 @@ void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block, I
         ++sum.pairs;
       }
   });
-  std::fill(std::begin(out.normal_equations), std::end(out.normal_equations), 0.0);
-  out.pairs = 0;
+  std::fill(normal_equations, normal_equations + 21, 0.0);
+  *pairs = 0;
   double depth_sum = 0;
   for (const Sum& sum : sums) {
-    for (int i = 0; i < 21; ++i) out.normal_equations[i] += sum.a[i];
+    for (int i = 0; i < 21; ++i) normal_equations[i] += sum.a[i];
     depth_sum += sum.depth;
-    out.pairs += sum.pairs;
+    *pairs += sum.pairs;
   }
-  out.mean_depth_m = out.pairs > 0 ? static_cast<float>(depth_sum / out.pairs) : 0.0f;
+  *mean_depth_m = *pairs > 0 ? static_cast<float>(depth_sum / *pairs) : 0.0f;
 }
 }  // namespace
 
@@ -169,7 +175,9 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
   int valid0 = 0;
   for (const Vec3f& v : frame.vertices[offset].data) valid0 += v.z > 0;
   FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
-                       result, pool);
+                       nullptr, result.normal_equations, &result.pairs, &result.mean_depth_m, pool);
+  // Level-0 pixels paired in the latest iteration (the one `last` sums).
+  std::vector<uint8_t> matched(frame.vertices[offset].data.size());
   for (int l = levels - 1; l >= 0; --l) {
     const Vec3Image& vs = frame.vertices[offset + l];
     const Vec3Image& ns = frame.normals[offset + l];
@@ -189,6 +197,8 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
         for (int y = h * task / kTasks; y < h * (task + 1) / kTasks; ++y) {
           float a[21] = {}, b[6] = {}, r2 = 0;
           int n = 0;
+          uint8_t* matched_row = l == 0 ? matched.data() + static_cast<size_t>(y) * w : nullptr;
+          if (matched_row != nullptr) std::fill(matched_row, matched_row + w, uint8_t{0});
           for (int x = 0; x < w; ++x) {
             const Vec3f v = vs.At(x, y);
             const Vec3f nv = ns.At(x, y);
@@ -221,6 +231,7 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
             }
             r2 += e * e;
             ++n;
+            if (matched_row != nullptr) matched_row[x] = 1;
           }
           for (int i = 0; i < 21; ++i) out.a[i] += a[i];
           for (int i = 0; i < 6; ++i) out.b[i] += b[i];
@@ -254,6 +265,9 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
       if (step2 < 1e-9) break;
     }
   }
+  FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
+                       matched.data(), result.matched_normal_equations, &result.matched_pairs,
+                       &result.matched_mean_depth_m, pool);
   result.inlier_fraction = valid0 > 0 ? static_cast<float>(last.n) / valid0 : 0.0f;
   result.rms_m = last.n > 0 ? static_cast<float>(std::sqrt(last.r2 / last.n)) : 0.0f;
   const Pose estimate = model.camera_to_world * rel;

@@ -184,11 +184,19 @@ TrackingQuality TrackingQualityMonitor::Assess(const IcpResult& icp, const Pose&
     Append(q.text, "icp: " + icp.failure);
     score = 0;
   }
-  q.observability = IcpObservability(icp.normal_equations, icp.pairs, icp.mean_depth_m);
+  q.frame_observability = IcpObservability(icp.normal_equations, icp.pairs, icp.mean_depth_m);
+  q.matched_observability =
+      IcpObservability(icp.matched_normal_equations, icp.matched_pairs, icp.matched_mean_depth_m);
+  // Without pairs (ICP stopped early, already failed) only the frame's geometry is known.
+  const bool matched = o.matched_observability && (icp.ok || icp.matched_pairs > 0);
+  const bool by_match = matched && q.matched_observability < q.frame_observability;
+  q.observability = by_match ? q.matched_observability : q.frame_observability;
   cue(q.observability, o.observability_good, o.observability_soft, o.observability_hard,
       kReasonDegenerate,
-      Format("degenerate geometry: observability %.4f (soft %.4f)", q.observability,
-             o.observability_soft));
+      Format(by_match ? "degenerate geometry: observability %.4f of the part matched to the model "
+                        "(soft %.4f)"
+                      : "degenerate geometry: observability %.4f (soft %.4f)",
+             q.observability, o.observability_soft));
   if (accepted_ >= o.warmup_frames) {
     q.residual_ratio = icp.rms_m / std::max(mean_rms_, o.residual_floor_m);
     cue(q.residual_ratio, o.residual_ratio_good, o.residual_ratio_soft, o.residual_ratio_hard,

@@ -8,7 +8,9 @@
 //     Newcombe et al. 2011), rotations scaled to metres by the mean depth (Gelfand et al. 2003,
 //     "Geometrically stable sampling for the ICP algorithm", 3DIM, §3: the eigenvalues of the
 //     point-to-plane covariance matrix); a single plane, or a floor and one wall, leave a slide
-//     unobserved and ICP's estimate along it is noise.
+//     unobserved and ICP's estimate along it is noise. Taken over the frame and over the part of it
+//     ICP matched to the model, whichever is weaker: geometry outside the model pins nothing, and
+//     a slow slide along a direction only it pinned keeps the other cues quiet.
 // Each cue maps to a score in [0, 1] (1 = clearly fine, 0.5 = at its soft limit, 0 = at its hard
 // limit); the frame's score is the smallest. The state follows the score exactly:
 //   tracked   <=> score >= 0.5 (every cue within its soft limit),
@@ -79,6 +81,10 @@ struct TrackingQualityOptions {
   float observability_good = 0.01f;
   float observability_soft = 0.005f;
   float observability_hard = 0.001f;
+  // The observability cue takes the smaller of the frame's and the model-matched part's
+  // (IcpResult::matched_normal_equations); false: the frame's only (for A/B measurements: it
+  // misses geometry the frame sees but the model lacks, e.g. outside the volume).
+  bool matched_observability = true;
   double nominal_frame_interval_s = 1.0 / 30.0;
   double max_interval_scale = 3.0;
   // Accepted frames before the residual and inlier cues apply (their running means need data).
@@ -104,7 +110,10 @@ struct TrackingQuality {
   float inlier_ratio = 0;          // inlier_fraction / running mean
   float motion_translation_m = 0;  // |translation of (predicted^-1 * step)|, metres
   float motion_rotation_deg = 0;   // rotation angle of (predicted^-1 * step), degrees
-  float observability = 0;         // IcpObservability of the result
+  // The observability cue: the smaller of the two below (matched only when ICP paired pixels).
+  float observability = 0;
+  float frame_observability = 0;    // IcpObservability of the frame's geometry
+  float matched_observability = 0;  // IcpObservability of the part ICP matched to the model
 };
 
 // How well the frame pins each direction of the pose: the smaller of the smallest eigenvalues of
