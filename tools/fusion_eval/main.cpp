@@ -29,7 +29,8 @@
 // FUSION_EVAL_MERGE_QUANT (MergeOptions::lambda_d_sigmas / noise_quantisation_per_m; 0 = the
 // paper's fixed lambda_D), FUSION_EVAL_DEPTH_SCALE (multiplies the depth), FUSION_EVAL_DEPTH_MAX
 // (m, drops farther depth), FUSION_EVAL_FOCAL (replaces fx = fy), FUSION_EVAL_K1 (k1[,k2]: radial
-// undistortion of the depth images, nearest neighbour).
+// undistortion of the depth images, nearest neighbour), FUSION_EVAL_OBSERVABILITY (good,soft,hard),
+// FUSION_EVAL_MATCHED_OBSERVABILITY (0: the observability cue from the frame's geometry only).
 // --min-inliers overrides the tracking-quality threshold.
 //
 // Sim: renders the scenario (noise-free depth = reference), runs the pipeline with the ground-
@@ -461,6 +462,9 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
     q.observability_hard = static_cast<float>(v[2]);
   }
   if (const auto nb = KnobInt("FUSION_EVAL_NORMAL_BLOCK", 0)) options.volume_normal_block = *nb;
+  if (const auto mo = KnobInt("FUSION_EVAL_MATCHED_OBSERVABILITY", 0, 1)) {
+    options.quality.matched_observability = *mo == 1;
+  }
   recon::FusionPipeline pipeline(options);
   const recon::VolumeOptions& vol = pipeline.options().volume;
   std::fprintf(stderr,
@@ -472,8 +476,9 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
   std::vector<double> pre_cpu, icp_cpu, integ_cpu, ray_cpu, mrg_cpu;
   std::vector<recon::Pose> est, truth;
   int lost = 0, uncertain = 0, relocalised = 0;
-  float min_observability = 1e9f, max_motion_m = 0, max_motion_deg = 0, max_residual_ratio = 0,
-        min_inlier_ratio = 1e9f, min_score = 1;
+  float min_observability = 1e9f, min_frame_observability = 1e9f, min_matched_observability = 1e9f,
+        max_motion_m = 0, max_motion_deg = 0, max_residual_ratio = 0, min_inlier_ratio = 1e9f,
+        min_score = 1;
   for (const Frame& f : frames) {
     const recon::GreyImage* grey =
         (f.grey.width == f.depth.width && f.grey.height == f.depth.height) ? &f.grey : nullptr;
@@ -487,6 +492,8 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       const recon::TrackingQuality& q = r.quality;
       min_score = std::min(min_score, q.score);
       min_observability = std::min(min_observability, q.observability);
+      min_frame_observability = std::min(min_frame_observability, q.frame_observability);
+      min_matched_observability = std::min(min_matched_observability, q.matched_observability);
       max_motion_m = std::max(max_motion_m, q.motion_translation_m);
       max_motion_deg = std::max(max_motion_deg, q.motion_rotation_deg);
       max_residual_ratio = std::max(max_residual_ratio, q.residual_ratio);
@@ -504,17 +511,18 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       const recon::Pose ae = frames[0].truth * r.camera_to_world;
       const double rot_err = (ae.Inverse() * f.truth).RotationAngle() * 57.2958;
       const recon::Vec3f fwd{static_cast<float>(rot_err), 0, 0};
-      std::fprintf(stderr,
-                   "frame %zu: %s inliers %.3f rms %.4f pose %.3f %.3f %.3f truth %.3f %.3f %.3f "
-                   "fwd %.2f %.2f %.2f depth %.2f/%.2f/%.2f %s | %s score %.3f obs %.4f motion "
-                   "%.4f m %.3f deg residual x%.2f inliers x%.2f %s\n",
-                   est.size(), r.state == recon::TrackingState::kLost ? "LOST" : "ok",
-                   r.icp.inlier_fraction, r.icp.rms_m, t.x, t.y, t.z, g.t[0], g.t[1], g.t[2], fwd.x,
-                   fwd.y, fwd.z, d10, d50, d90, r.icp.failure.c_str(),
-                   std::string(recon::TrackingStateName(r.state)).c_str(), r.quality.score,
-                   r.quality.observability, r.quality.motion_translation_m,
-                   r.quality.motion_rotation_deg, r.quality.residual_ratio, r.quality.inlier_ratio,
-                   r.quality.text.c_str());
+      std::fprintf(
+          stderr,
+          "frame %zu: %s inliers %.3f rms %.4f pose %.3f %.3f %.3f truth %.3f %.3f %.3f "
+          "fwd %.2f %.2f %.2f depth %.2f/%.2f/%.2f %s | %s score %.3f obs %.4f (frame %.4f, "
+          "matched %.4f) motion %.4f m %.3f deg residual x%.2f inliers x%.2f %s\n",
+          est.size(), r.state == recon::TrackingState::kLost ? "LOST" : "ok", r.icp.inlier_fraction,
+          r.icp.rms_m, t.x, t.y, t.z, g.t[0], g.t[1], g.t[2], fwd.x, fwd.y, fwd.z, d10, d50, d90,
+          r.icp.failure.c_str(), std::string(recon::TrackingStateName(r.state)).c_str(),
+          r.quality.score, r.quality.observability, r.quality.frame_observability,
+          r.quality.matched_observability, r.quality.motion_translation_m,
+          r.quality.motion_rotation_deg, r.quality.residual_ratio, r.quality.inlier_ratio,
+          r.quality.text.c_str());
     }
     total.push_back(r.timings.total_ms);
     pre.push_back(r.timings.preprocess_ms);
@@ -545,6 +553,8 @@ int RunSevenScenes(const std::string& dir, std::pair<int, int> range, bool peer,
       // The tracking-quality cues' extremes over the tracked frames (recon/tracking_quality.h).
       {"quality_min_score", min_score},
       {"quality_min_observability", min_observability},
+      {"quality_min_frame_observability", min_frame_observability},
+      {"quality_min_matched_observability", min_matched_observability},
       {"quality_max_motion_m", max_motion_m},
       {"quality_max_motion_deg", max_motion_deg},
       {"quality_max_residual_ratio", max_residual_ratio},
