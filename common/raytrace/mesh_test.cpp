@@ -63,6 +63,15 @@ TEST_F(MeshFiles, ObjErrorsNameFileAndLine) {
   const std::string bad_index = Write("b.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
   EXPECT_EQ(ErrorOf([&] { LoadObj(bad_index); }),
             bad_index + ":4: vertex index 4 out of range (3 defined so far)");
+  // A relative index one before the first vertex (mesh_fuzz: it was taken as "no index" and
+  // read v[-1]).
+  const std::string before_first = Write("r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 -2 -1\n");
+  EXPECT_EQ(ErrorOf([&] { LoadObj(before_first); }),
+            before_first + ":4: vertex index -4 out of range (3 defined so far)");
+  const std::string uv_before_first =
+      Write("s.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/-2 2/1 3/1\n");
+  EXPECT_EQ(ErrorOf([&] { LoadObj(uv_before_first); }),
+            uv_before_first + ":5: texture coordinate index -2 out of range (1 defined so far)");
   const std::string short_face = Write("c.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
   EXPECT_EQ(ErrorOf([&] { LoadObj(short_face); }),
             short_face + ":3: face 'f' expects at least 3 vertices, got 2");

@@ -142,9 +142,12 @@ Mesh LoadObj(const std::string& path) {
                                     static_cast<long long>(vn.size())};
         const char* names[3] = {"vertex", "texture coordinate", "normal"};
         for (int part = 0; part < 3; ++part) {
+          // 0 means "not given"; a relative index that resolves to 0 or below is out of range (it
+          // was taken as "not given", and for the vertex read v[-1]; found by mesh_fuzz).
+          const long long written = idx[part];
           if (idx[part] < 0) idx[part] += sizes[part] + 1;
-          if (idx[part] != 0 && (idx[part] < 1 || idx[part] > sizes[part])) {
-            fail(std::string(names[part]) + " index " + std::to_string(idx[part]) +
+          if (written != 0 && (idx[part] < 1 || idx[part] > sizes[part])) {
+            fail(std::string(names[part]) + " index " + std::to_string(written) +
                  " out of range (" + std::to_string(sizes[part]) + " defined so far)");
           }
         }
