@@ -62,17 +62,42 @@ function(probeless_sanitize_depends)
   add_dependencies(sanitize_targets ${ARGN})
 endfunction()
 
-# probeless_add_fuzzer(NAME <name> SOURCES <files...> LIBS <targets...>)
-# A libFuzzer target in <build>/fuzz/<name>, built only with -DPROBELESS_BUILD_FUZZERS=ON (clang).
+# The fuzz build instruments every library, not only the fuzz targets: libFuzzer's coverage
+# feedback then reaches the parsers' own branches, and ASan/UBSan catch a bad access or undefined
+# behaviour inside a library where it happens (UBSan aborts, so libFuzzer keeps the input).
+if(PROBELESS_BUILD_FUZZERS)
+  add_compile_options(-fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=undefined
+                      -fno-omit-frame-pointer)
+  add_link_options(-fsanitize=address,undefined)
+endif()
+
+# probeless_add_fuzzer(NAME <name> SOURCES <files...> LIBS <targets...> [CORPUS <dir>]
+#                      [LABELS <labels...>])
+# With -DPROBELESS_BUILD_FUZZERS=ON (clang): a libFuzzer target in <build>/fuzz/<name>. With a
+# CORPUS, ctest replays every file of it once as <name>_seeds (labels fuzz + LABELS) in every
+# build: in a test build through tests/fuzz/replay_main.cpp (no libFuzzer needed), so a committed
+# regression input fails the ordinary ctest run if its bug comes back.
 function(probeless_add_fuzzer)
-  cmake_parse_arguments(F "" "NAME" "SOURCES;LIBS" ${ARGN})
-  if(NOT PROBELESS_BUILD_FUZZERS)
+  cmake_parse_arguments(F "" "NAME;CORPUS" "SOURCES;LIBS;LABELS" ${ARGN})
+  if(PROBELESS_BUILD_FUZZERS)
+    add_executable(${F_NAME} ${F_SOURCES})
+    target_compile_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
+    target_link_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
+    target_link_libraries(${F_NAME} PRIVATE ${F_LIBS})
+    set_target_properties(${F_NAME} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/fuzz)
+    add_dependencies(fuzz_targets ${F_NAME})
+    set(_command ${F_NAME} -runs=0 ${F_CORPUS})
+  elseif(PROBELESS_BUILD_TESTS AND F_CORPUS)
+    add_executable(${F_NAME}_replay ${F_SOURCES} ${PROJECT_SOURCE_DIR}/tests/fuzz/replay_main.cpp)
+    target_link_libraries(${F_NAME}_replay PRIVATE ${F_LIBS})
+    set_target_properties(${F_NAME}_replay PROPERTIES RUNTIME_OUTPUT_DIRECTORY
+                                                      ${CMAKE_BINARY_DIR}/tests)
+    set(_command ${F_NAME}_replay ${F_CORPUS})
+  else()
     return()
   endif()
-  add_executable(${F_NAME} ${F_SOURCES})
-  target_compile_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
-  target_link_options(${F_NAME} PRIVATE -fsanitize=fuzzer,address,undefined)
-  target_link_libraries(${F_NAME} PRIVATE ${F_LIBS})
-  set_target_properties(${F_NAME} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/fuzz)
-  add_dependencies(fuzz_targets ${F_NAME})
+  if(F_CORPUS)
+    add_test(NAME ${F_NAME}_seeds COMMAND ${_command})
+    set_tests_properties(${F_NAME}_seeds PROPERTIES TIMEOUT 60 LABELS "fuzz;${F_LABELS}")
+  endif()
 endfunction()
