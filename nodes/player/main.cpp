@@ -119,8 +119,16 @@ class Keyboard {
   std::thread thread_;
 };
 
+constexpr const char* kUsage =
+    "usage: player SOURCE [--rate R] [--fast] [--loop] [--start S] [--duration S]\n"
+    "              [--topics REGEX]... [--exclude REGEX]... [--remap FROM:=TO]...\n"
+    "              [--clock TOPIC | --no-clock] [--control TOPIC] [--lockstep NODE]... [--paused]\n"
+    "              [--delay S] [--fps F] [--camera-info FILE] [--prefix /camera] [--max-frames N]\n"
+    "              [--subjects 1,5] [--slots N] [--no-keyboard] [--ros-args ...]\n"
+    "  SOURCE: an MCAP log or a dataset folder (docs/replay.md, docs/dataset.md)\n";
+
 int Run(int argc, char** argv) {
-  node::Node node(argc, argv, "player");
+  node::Node node(argc, argv, "player", kUsage);
   replay::PlayerOptions options;
   dataset::DatasetOptions dataset_options;
   std::string source_spec = node.Param("source", "");

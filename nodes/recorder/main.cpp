@@ -190,7 +190,7 @@ int Run(int argc, char** argv) {
   std::unique_ptr<probeless::node::Node> node;
   std::unique_ptr<probeless::record::Recorder> recorder;
   try {
-    node = std::make_unique<probeless::node::Node>(argc, argv, "recorder");
+    node = std::make_unique<probeless::node::Node>(argc, argv, "recorder", kUsage);
     name = node->fully_qualified_name();
     Settings s;
     s.topics = node->Param<std::vector<std::string>>("topics", {});

@@ -182,8 +182,20 @@ int Generate(int count, uint64_t seed, const std::string& split_name, const std:
   return 0;
 }
 
+constexpr const char* kUsage =
+    "usage: sim SCENARIO.yaml [--out FILE.mcap] [--preview FILE.png] [--frames N] [--threads N]\n"
+    "           [--rate R] [--fast] [--loop] [--prefix /camera] [--ground-truth-prefix "
+    "/groundtruth]\n"
+    "           [--lockstep NODE]... [--no-clock] [--ros-args ...]\n"
+    "       sim --yaleb-style OUT_DIR [--subjects N] [--size 168x192] [--rgb] [--behind] [--seed "
+    "S]\n"
+    "           [--mesh procedural|ict] [--threads N]\n"
+    "       sim --generate N --split train|validation|test --out DIR [--seed S] [--frames F]\n"
+    "           [--spp P] [--bounces B] [--size 640x480] [--threads N] [--resume]\n"
+    "  docs/sim.md\n";
+
 int Run(int argc, char** argv) {
-  node::Node node(argc, argv, "sim");
+  node::Node node(argc, argv, "sim", kUsage);
   std::string scenario_path = node.Param("scenario", "");
   std::string out = node.Param("out", "");
   std::string preview = node.Param("preview", "");
@@ -253,11 +265,17 @@ int Run(int argc, char** argv) {
       yaleb_option_seen = true;
     } else if (a == "--size") {
       const std::string size = value();
-      int w = 0, h = 0;
-      char tail = 0;
-      if (std::sscanf(size.c_str(), "%dx%d%c", &w, &h, &tail) != 2) {
+      // Whole-text parse, positive sizes (sscanf took "-5x3").
+      const size_t x = size.find('x');
+      const std::string_view view(size);
+      const auto w_parsed = parse::TryParseInteger<int>(view.substr(0, x), 1);
+      const auto h_parsed = x == std::string::npos
+                                ? std::nullopt
+                                : parse::TryParseInteger<int>(view.substr(x + 1), 1);
+      if (!w_parsed || !h_parsed) {
         throw node::UsageError("--size: expected WIDTHxHEIGHT, got '" + size + "'");
       }
+      const int w = *w_parsed, h = *h_parsed;
       yaleb.width = generate.width = w;
       yaleb.height = generate.height = h;
       yaleb_option_seen = true;

@@ -32,6 +32,7 @@
 
 #include "control.h"
 #include "probeless/bus/bus.h"
+#include "probeless/parse/number.h"
 #include "report.h"
 #include "roudi.h"
 
@@ -792,9 +793,9 @@ int Main(int argc, char** argv) {
     } else if (arg == "--role") {
       role = value();
     } else if (arg == "--ctl-fd") {
-      ctl_fd = std::stoi(value());
+      ctl_fd = parse::ParseInteger<int>(arg, value(), 0);
     } else if (arg == "--index") {
-      index = static_cast<uint32_t>(std::stoul(value()));
+      index = parse::ParseInteger<uint32_t>(arg, value());
     } else if (arg == "-h" || arg == "--help") {
       PrintUsage();
       return 0;
@@ -867,10 +868,8 @@ int Main(int argc, char** argv) {
   if (!sizes_arg.empty()) {
     plan.sizes.clear();
     for (const std::string& s : Split(sizes_arg)) {
-      const uint64_t size = std::stoull(s);
-      if (size < kHeaderBytes || size > (64u << 20)) {
-        throw std::invalid_argument("size " + s + " out of range 64..67108864 bytes");
-      }
+      const uint64_t size = parse::ParseInteger<uint64_t>("--sizes item", s, uint64_t{kHeaderBytes},
+                                                          uint64_t{64u << 20});
       plan.sizes.push_back(size);
     }
   }

@@ -15,19 +15,27 @@
 #include <cstdio>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "probeless/calib/calibration.h"
 #include "probeless/msgs/image.h"
 #include "probeless/node/node.h"
+#include "probeless/parse/number.h"
 
 namespace {
 
 using namespace probeless;
 
+constexpr const char* kUsage =
+    "usage: calibrate --size 9x6 --square 0.025 [--topic /camera/image] [--frames 20]\n"
+    "                 [--out camera.yaml] [--name webcam] [--min-interval 0.5]\n"
+    "  --size: INNER corners (columns x rows); --square: square side in metres\n";
+
 int Run(int argc, char** argv) {
-  node::Node node(argc, argv, "calibrate");
+  node::Node node(argc, argv, "calibrate", kUsage);
   std::string topic = node.Param("topic", "/camera/image");
   std::string out = node.Param("out", "camera.yaml");
   std::string name = node.Param("name", "camera");
@@ -53,14 +61,21 @@ int Run(int argc, char** argv) {
     else if (a == "--square")
       square = node::ParseNumberOption(a, value());
     else if (a == "--frames")
-      frames = static_cast<int>(node::ParseNumberOption(a, value()));
+      frames = parse::ParseInteger<int>(a, value(), 3);
     else if (a == "--min-interval")
       min_interval = node::ParseNumberOption(a, value());
     else
       throw node::UsageError("unknown option '" + a + "'");
   }
-  int cols = 0, rows = 0;
-  if (std::sscanf(size_text.c_str(), "%dx%d", &cols, &rows) != 2 || cols < 2 || rows < 2) {
+  // Whole-text parse: sscanf took "9x6abc" and "9x6x2" as 9x6.
+  const size_t x = size_text.find('x');
+  const std::string_view size_view(size_text);
+  const auto cols_parsed = parse::TryParseInteger<int>(size_view.substr(0, x), 2);
+  const auto rows_parsed = x == std::string::npos
+                               ? std::nullopt
+                               : parse::TryParseInteger<int>(size_view.substr(x + 1), 2);
+  const int cols = cols_parsed.value_or(0), rows = rows_parsed.value_or(0);
+  if (!cols_parsed || !rows_parsed) {
     throw node::UsageError("--size must be COLSxROWS inner corners, e.g. 9x6, got '" + size_text +
                            "'");
   }

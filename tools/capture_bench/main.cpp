@@ -16,6 +16,7 @@
 
 #include "probeless/capture/convert.h"
 #include "probeless/capture/registration.h"
+#include "probeless/parse/number.h"
 
 namespace {
 
@@ -46,16 +47,25 @@ Figure Time(const std::string& name, int iterations, const std::function<void()>
 int main(int argc, char** argv) {
   std::string json_path;
   int iterations = 200;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--json" && i + 1 < argc) {
-      json_path = argv[++i];
-    } else if (a == "--iterations" && i + 1 < argc) {
-      iterations = std::max(1, std::atoi(argv[++i]));
-    } else {
-      std::fprintf(stderr, "usage: capture_bench [--json OUT] [--iterations N]\n");
-      return 2;
+  constexpr const char* kUsage = "usage: capture_bench [--json OUT] [--iterations N]\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") {
+        std::printf("%s", kUsage);
+        return 0;
+      } else if (a == "--json" && i + 1 < argc) {
+        json_path = argv[++i];
+      } else if (a == "--iterations" && i + 1 < argc) {
+        iterations = probeless::parse::ParseInteger<int>(a, argv[++i], 1);
+      } else {
+        std::fprintf(stderr, "%s", kUsage);
+        return 2;
+      }
     }
+  } catch (const probeless::parse::NumberError& e) {
+    std::fprintf(stderr, "capture_bench: %s\n", e.what());
+    return 2;
   }
   const uint32_t w = 640, h = 480;
   // A natural-ish test pattern (gradients plus texture) so JPEG has real work to do.

@@ -30,6 +30,7 @@
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/layout.h"
 #include "probeless/node/main.h"
+#include "probeless/parse/number.h"
 
 extern char** environ;
 
@@ -167,7 +168,7 @@ int Main(int argc, char** argv) {
     if (arg == "--json") json = value();
     else if (arg == "--frames") frames = static_cast<uint32_t>(node::ParseNumberOption(arg, value()));
     else if (arg == "--seconds") seconds = node::ParseNumberOption(arg, value());
-    else if (arg == "--domain-id") domain_id = static_cast<int>(node::ParseNumberOption(arg, value()));
+    else if (arg == "--domain-id") domain_id = parse::ParseInteger<int>(arg, value());
     else if (arg == "-h" || arg == "--help") {
       std::puts("usage: dds_bench [--json OUT] [--frames N] [--seconds S] [--domain-id D]");
       return 0;

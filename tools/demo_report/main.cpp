@@ -114,6 +114,12 @@ int Run(int argc, char** argv) {
   std::string stages;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
+    if (a == "-h" || a == "--help") {
+      std::printf(
+          "usage: demo_report LOG.mcap [--estimate /face/light] [--truth /groundtruth/light]\n"
+          "                   [--out DIR] [--name face] [--stage ...]\n");
+      return 0;
+    }
     auto value = [&]() -> std::string {
       if (i + 1 >= argc) throw node::UsageError(a + " needs a value");
       return argv[++i];

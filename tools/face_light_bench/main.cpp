@@ -14,6 +14,7 @@
 
 #include "probeless/face_light/estimator.h"
 #include "probeless/face_light/model.h"
+#include "probeless/parse/number.h"
 
 namespace fl = probeless::face_light;
 
@@ -49,7 +50,12 @@ int Run(int argc, char** argv) {
     if (flag == "--model") {
       model_path = value;
     } else if (flag == "--frames") {
-      frames = std::max(1, std::atoi(value.c_str()));
+      frames = probeless::parse::TryParseInteger<int>(value, 1).value_or(0);
+      if (frames == 0) {
+        std::cerr << "face_light_bench: --frames expects a positive integer, got '" << value
+                  << "'\n";
+        return 2;
+      }
     } else if (flag == "--json") {
       json_path = value;
     } else if (flag == "--case") {

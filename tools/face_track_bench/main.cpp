@@ -25,6 +25,7 @@
 #include "probeless/face_light/model.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/parse/number.h"
 #include "probeless/sim/scenario.h"
 #include "probeless/sim/simulator.h"
 
@@ -181,43 +182,53 @@ int main(int argc, char** argv) {
   base.yunet_model_path =
       (data && *data ? std::string(data) : std::string(PROBELESS_SOURCE_TREE) + "/../shared/data") +
       "/models/yunet_120x160.onnx";
-  for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--json")) {
-      json = true;
-    } else if (!std::strcmp(argv[i], "--coverage")) {
-      coverage = true;
-    } else if (!std::strcmp(argv[i], "--no-flow")) {
-      flow_tracking = false;
-    } else if (!std::strcmp(argv[i], "--no-clahe")) {
-      clahe = false;
-    } else if (!std::strcmp(argv[i], "--cache") && i + 1 < argc) {
-      cache = argv[++i];
-    } else if (!std::strcmp(argv[i], "--redetect-period") && i + 1 < argc) {
-      redetect_period = std::max(1, std::atoi(argv[++i]));
-    } else if (!std::strcmp(argv[i], "--backend") && i + 1 < argc) {
-      backend = argv[++i];
-      if (backend != "dlib" && backend != "yunet" && backend != "haar") {
-        std::fprintf(stderr,
-                     "[error] [face_track_bench] unknown --backend '%s' (dlib, yunet or haar)\n",
-                     backend.c_str());
+  constexpr const char* kUsage =
+      "usage: face_track_bench [--frames N] [--no-flow] [--no-clahe] [--backend dlib|yunet|haar] "
+      "[--yunet-model PATH] [--haar-cascade PATH] [--json]\n"
+      "       face_track_bench --coverage [--cache DIR] [--redetect-period N] [--no-flow] "
+      "[--no-clahe] [--backend ...] [--json]\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      if (!std::strcmp(argv[i], "-h") || !std::strcmp(argv[i], "--help")) {
+        std::printf("%s", kUsage);
+        return 0;
+      } else if (!std::strcmp(argv[i], "--json")) {
+        json = true;
+      } else if (!std::strcmp(argv[i], "--coverage")) {
+        coverage = true;
+      } else if (!std::strcmp(argv[i], "--no-flow")) {
+        flow_tracking = false;
+      } else if (!std::strcmp(argv[i], "--no-clahe")) {
+        clahe = false;
+      } else if (!std::strcmp(argv[i], "--cache") && i + 1 < argc) {
+        cache = argv[++i];
+      } else if (!std::strcmp(argv[i], "--redetect-period") && i + 1 < argc) {
+        redetect_period = probeless::parse::ParseInteger<int>(argv[i], argv[i + 1], 1);
+        ++i;
+      } else if (!std::strcmp(argv[i], "--backend") && i + 1 < argc) {
+        backend = argv[++i];
+        if (backend != "dlib" && backend != "yunet" && backend != "haar") {
+          std::fprintf(stderr,
+                       "[error] [face_track_bench] unknown --backend '%s' (dlib, yunet or haar)\n",
+                       backend.c_str());
+          return 2;
+        }
+        base.backend = ft::BackendFromName(backend);
+      } else if (!std::strcmp(argv[i], "--yunet-model") && i + 1 < argc) {
+        base.yunet_model_path = argv[++i];
+      } else if (!std::strcmp(argv[i], "--haar-cascade") && i + 1 < argc) {
+        base.haar_cascade_path = argv[++i];
+      } else if (!std::strcmp(argv[i], "--frames") && i + 1 < argc) {
+        frames = probeless::parse::ParseInteger<int>(argv[i], argv[i + 1], 10);
+        ++i;
+      } else {
+        std::fprintf(stderr, "[error] [face_track_bench] %s", kUsage);
         return 2;
       }
-      base.backend = ft::BackendFromName(backend);
-    } else if (!std::strcmp(argv[i], "--yunet-model") && i + 1 < argc) {
-      base.yunet_model_path = argv[++i];
-    } else if (!std::strcmp(argv[i], "--haar-cascade") && i + 1 < argc) {
-      base.haar_cascade_path = argv[++i];
-    } else if (!std::strcmp(argv[i], "--frames") && i + 1 < argc) {
-      frames = std::max(10, std::atoi(argv[++i]));
-    } else {
-      std::fprintf(stderr,
-                   "[error] [face_track_bench] usage: face_track_bench [--frames N] [--no-flow] "
-                   "[--no-clahe] [--backend dlib|yunet|haar] [--yunet-model PATH] "
-                   "[--haar-cascade PATH] [--json]\n"
-                   "       face_track_bench --coverage [--cache DIR] [--redetect-period N] "
-                   "[--no-flow] [--no-clahe] [--backend ...] [--json]\n");
-      return 2;
     }
+  } catch (const probeless::parse::NumberError& e) {
+    std::fprintf(stderr, "[error] [face_track_bench] %s\n", e.what());
+    return 2;
   }
   if (coverage) {
     try {

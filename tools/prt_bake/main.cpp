@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/parse/number.h"
 #include "probeless/prt/demo_objects.h"
 #include "probeless/prt/prt.h"
 
@@ -34,21 +35,25 @@ struct Options {
   bool benchmark = false;
 };
 
+constexpr const char* kUsage =
+    "usage: prt_bake (MESH | --demo nose|cap|glasses) --out FILE.prt [--occluder "
+    "head|none|SCENE] [--bands B] [--samples N] [--seed S] [--bounce] "
+    "[--no-self-occlusion] [--threads N] [--scale F] [--quiet]\n"
+    "       prt_bake --benchmark [--threads N] [--samples N]\n";
+
 [[noreturn]] void Usage(const std::string& message) {
-  std::fprintf(stderr, "prt_bake: %s\n", message.c_str());
-  std::fprintf(stderr,
-               "usage: prt_bake (MESH | --demo nose|cap|glasses) --out FILE.prt [--occluder "
-               "head|none|SCENE] [--bands B] [--samples N] [--seed S] [--bounce] "
-               "[--no-self-occlusion] [--threads N] [--scale F] [--quiet]\n"
-               "       prt_bake --benchmark [--threads N] [--samples N]\n");
+  std::fprintf(stderr, "prt_bake: %s\n%s", message.c_str(), kUsage);
   std::exit(2);
 }
 
-long ParseInt(const std::string& option, const std::string& text) {
-  char* end = nullptr;
-  const long v = std::strtol(text.c_str(), &end, 10);
-  if (text.empty() || *end != '\0') Usage(option + " expects an integer, got '" + text + "'");
-  return v;
+// parse::'s rules; strtol took "3x" as 3 and a 20-digit count as LONG_MAX.
+template <class T>
+T ParseInt(const std::string& option, const std::string& text, T min) {
+  try {
+    return parse::ParseInteger<T>(option, text, min);
+  } catch (const parse::NumberError& e) {
+    Usage(e.what());
+  }
 }
 
 Options Parse(int argc, char** argv) {
@@ -66,16 +71,19 @@ Options Parse(int argc, char** argv) {
     else if (a == "--occluder")
       o.occluder = value();
     else if (a == "--bands")
-      o.bake.bands = static_cast<int>(ParseInt(a, value()));
+      o.bake.bands = ParseInt<int>(a, value(), 1);
     else if (a == "--samples")
-      o.bake.samples = static_cast<int>(ParseInt(a, value()));
+      o.bake.samples = ParseInt<int>(a, value(), 1);
     else if (a == "--seed")
-      o.bake.seed = static_cast<uint64_t>(ParseInt(a, value()));
+      o.bake.seed = ParseInt<uint64_t>(a, value(), 0);
     else if (a == "--threads")
-      o.bake.threads = static_cast<int>(ParseInt(a, value()));
-    else if (a == "--scale")
-      o.scale = std::strtof(value().c_str(), nullptr);
-    else if (a == "--bounce")
+      o.bake.threads = ParseInt<int>(a, value(), 1);
+    else if (a == "--scale") {
+      const std::string text = value();
+      const auto scale = parse::TryParseDouble(text, 0);
+      if (!scale || *scale <= 0) Usage("--scale expects a positive number, got '" + text + "'");
+      o.scale = static_cast<float>(*scale);
+    } else if (a == "--bounce")
       o.bake.interreflection = true;
     else if (a == "--no-self-occlusion")
       o.bake.self_occlusion = false;
@@ -83,9 +91,10 @@ Options Parse(int argc, char** argv) {
       o.quiet = true;
     else if (a == "--benchmark")
       o.benchmark = true;
-    else if (a == "-h" || a == "--help")
-      Usage("help");
-    else if (!a.empty() && a[0] == '-')
+    else if (a == "-h" || a == "--help") {
+      std::printf("%s", kUsage);
+      std::exit(0);
+    } else if (!a.empty() && a[0] == '-')
       Usage("unknown option " + a);
     else if (o.input.empty())
       o.input = a;

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "pathtrace_room.h"
+#include "probeless/parse/number.h"
 #include "probeless/raytrace/pathtrace.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/sim/simulator.h"
@@ -68,16 +69,21 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--scenario") {
+    if (a == "-h" || a == "--help") {
+      std::printf(
+          "usage: raytrace_bench [--scenario FILE] [--frames N] [--threads N] [--json OUT]\n"
+          "                      [--pt-spp N] [--pt-image OUT.png] [--no-pt]\n");
+      return 0;
+    } else if (a == "--scenario") {
       scenario_path = value();
     } else if (a == "--frames") {
-      frames = std::stoi(value());
+      frames = parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--threads") {
-      threads = std::stoi(value());
+      threads = parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--json") {
       json = value();
     } else if (a == "--pt-spp") {
-      pt_spp = std::stoi(value());
+      pt_spp = parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--pt-image") {
       pt_image = value();
     } else if (a == "--no-pt") {

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/parse/number.h"
 #include "probeless/raytrace/pathtrace.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/raytrace/scene.h"
@@ -182,14 +183,17 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--out") {
+    if (a == "-h" || a == "--help") {
+      std::printf("usage: pathtrace_compare --out DIR [--scene NAME] [--spp N] [--bounces N]\n");
+      return 0;
+    } else if (a == "--out") {
       dir = value();
     } else if (a == "--scene") {
       which = value();
     } else if (a == "--spp") {
-      spp = std::stoi(value());
+      spp = probeless::parse::ParseInteger<int>(a, value(), 1);
     } else if (a == "--bounces") {
-      bounces = std::stoi(value());
+      bounces = probeless::parse::ParseInteger<int>(a, value(), 0);
     } else {
       throw std::invalid_argument("unknown option '" + a +
                                   "' (expected --out, --scene, --spp, --bounces)");

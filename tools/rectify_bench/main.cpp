@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/parse/number.h"
 #include "probeless/rectify/rectify.h"
 
 namespace {
@@ -95,16 +96,25 @@ struct Frame {
 int main(int argc, char** argv) {
   std::string json_path;
   int iterations = 300;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--json" && i + 1 < argc) {
-      json_path = argv[++i];
-    } else if (a == "--iterations" && i + 1 < argc) {
-      iterations = std::max(1, std::atoi(argv[++i]));
-    } else {
-      std::fprintf(stderr, "usage: rectify_bench [--json OUT] [--iterations N]\n");
-      return 2;
+  constexpr const char* kUsage = "usage: rectify_bench [--json OUT] [--iterations N]\n";
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      if (a == "-h" || a == "--help") {
+        std::printf("%s", kUsage);
+        return 0;
+      } else if (a == "--json" && i + 1 < argc) {
+        json_path = argv[++i];
+      } else if (a == "--iterations" && i + 1 < argc) {
+        iterations = probeless::parse::ParseInteger<int>(a, argv[++i], 1);
+      } else {
+        std::fprintf(stderr, "%s", kUsage);
+        return 2;
+      }
     }
+  } catch (const probeless::parse::NumberError& e) {
+    std::fprintf(stderr, "rectify_bench: %s\n", e.what());
+    return 2;
   }
   rectify::SetThreads(1);  // the budget is per core
   const msgs::CameraInfo info = Freiburg1();

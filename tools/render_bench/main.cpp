@@ -31,12 +31,12 @@
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/parse/number.h"
 #include "probeless/prt/demo_objects.h"
 #include "probeless/prt/prt.h"
 #include "probeless/render/differential.h"
 #include "probeless/render/renderer.h"
 #include "probeless/sh/sh.h"
-#include "probeless/parse/number.h"
 
 namespace {
 

@@ -113,6 +113,7 @@
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/parse/number.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
 #include "probeless/replay/sources.h"
@@ -665,7 +666,17 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw node::UsageError(a + " needs a value");
       return argv[++i];
     };
-    if (a == "--sim")
+    if (a == "-h" || a == "--help") {
+      // The options are documented at the top of tools/scene_light_eval/main.cpp.
+      std::printf(
+          "usage: scene_light_eval [--sim SCENARIO.yaml | --log FILE.mcap] --json OUT\n"
+          "         [--plots DIR] [--frames N] [--directions N] [--bands B] [--aux]\n"
+          "         [--threads T] [--camera-truth] [--grey-world] [--quadrature] [--fused]\n"
+          "         [--mix] ...\n"
+          "  every option: the comment at the top of tools/scene_light_eval/main.cpp;\n"
+          "  docs/light.md\n");
+      return 0;
+    } else if (a == "--sim")
       o.sim = value();
     else if (a == "--log")
       o.log = value();
@@ -674,15 +685,15 @@ int Run(int argc, char** argv) {
     else if (a == "--plots")
       o.plots = value();
     else if (a == "--frames")
-      o.frames = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.frames = parse::ParseInteger<int>(a, value());
     else if (a == "--directions")
-      o.directions = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.directions = parse::ParseInteger<int>(a, value());
     else if (a == "--seed")
-      o.seed = static_cast<uint64_t>(node::ParseNumberOption(a, value()));
+      o.seed = parse::ParseInteger<uint64_t>(a, value());
     else if (a == "--bands")
-      o.bands = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.bands = parse::ParseInteger<int>(a, value());
     else if (a == "--threads")
-      o.threads = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.threads = parse::ParseInteger<int>(a, value());
     else if (a == "--aux")
       o.aux = true;
     else if (a == "--aux-roles")
@@ -690,7 +701,7 @@ int Run(int argc, char** argv) {
     else if (a == "--aux-top-camera")
       o.aux = o.aux_top_camera = true;
     else if (a == "--aux-resolution")
-      o.aux = true, o.aux_resolution = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.aux = true, o.aux_resolution = parse::ParseInteger<int>(a, value());
     else if (a == "--aux-standoff")
       o.aux = true, o.aux_standoff = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--camera-truth")
@@ -704,7 +715,7 @@ int Run(int argc, char** argv) {
     } else if (a == "--invariant-albedo")
       o.invariant_albedo = true;
     else if (a == "--albedo-groups")
-      o.albedo_groups = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.albedo_groups = parse::ParseInteger<int>(a, value());
     else if (a == "--quadrature")
       o.quadrature = true;
     else if (a == "--fused")
@@ -714,7 +725,7 @@ int Run(int argc, char** argv) {
     else if (a == "--normal-filter")
       o.normal_filter = true;
     else if (a == "--filter-radius")
-      o.filter.radius = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.filter.radius = parse::ParseInteger<int>(a, value());
     else if (a == "--filter-angle")
       o.filter.max_neighbour_angle_deg = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--filter-view")
@@ -722,15 +733,15 @@ int Run(int argc, char** argv) {
     else if (a == "--filter-jump")
       o.filter.max_plane_distance_rel = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--smooth-radius")
-      o.smooth_radius = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.smooth_radius = parse::ParseInteger<int>(a, value());
     else if (a == "--normal-step")
-      o.normal_step = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.normal_step = parse::ParseInteger<int>(a, value());
     else if (a == "--fused-volume")
       o.fused = o.fused_volume = true;
     else if (a == "--fused-normal-step")
-      o.fused_normal_step = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.fused_normal_step = parse::ParseInteger<int>(a, value());
     else if (a == "--temporal")
-      o.temporal = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.temporal = parse::ParseInteger<int>(a, value());
     else if (a == "--forgetting")
       o.forgetting = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--no-balance")
@@ -752,9 +763,9 @@ int Run(int argc, char** argv) {
     else if (a == "--fast-shadows")
       o.fast_shadows = true;
     else if (a == "--shadow-stride")
-      o.shadow.stride = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.stride = parse::ParseInteger<int>(a, value());
     else if (a == "--shadow-directions")
-      o.shadow.coarse_directions = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.coarse_directions = parse::ParseInteger<int>(a, value());
     else if (a == "--shadow-min-score")
       o.shadow.min_score = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-min-gain")
@@ -768,13 +779,13 @@ int Run(int argc, char** argv) {
     else if (a == "--shadow-behind-lit")
       o.shadow.unknown_behind = false;
     else if (a == "--shadow-steps")
-      o.shadow.march_steps = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.march_steps = parse::ParseInteger<int>(a, value());
     else if (a == "--shadow-thickness-steps")
       o.shadow.thickness_steps = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-candidates")
-      o.shadow.candidates = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.candidates = parse::ParseInteger<int>(a, value());
     else if (a == "--shadow-coarse-stride")
-      o.shadow.coarse_stride = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.coarse_stride = parse::ParseInteger<int>(a, value());
     else if (a == "--shadow-max-runner-up")
       o.shadow.max_runner_up = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-bias")
@@ -798,11 +809,11 @@ int Run(int argc, char** argv) {
     else if (a == "--shadow-boundary-ratio")
       o.shadow.boundary_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--shadow-chroma")
-      o.shadow.chroma_cells = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.shadow.chroma_cells = parse::ParseInteger<int>(a, value());
     else if (a == "--lamps")
-      o.lamps = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.lamps = parse::ParseInteger<int>(a, value());
     else if (a == "--point-rows")
-      o.point_rows = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.point_rows = parse::ParseInteger<int>(a, value());
     else if (a == "--legacy-normals")
       o.depth_geometry.normals_from = light::DepthNormals::kCentral;
     else if (a == "--edge-normals")
@@ -826,15 +837,15 @@ int Run(int argc, char** argv) {
     else if (a == "--cold")
       o.point_warm = false;
     else if (a == "--screen-rows")
-      o.screen_rows = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.screen_rows = parse::ParseInteger<int>(a, value());
     else if (a == "--screen-lm")
-      o.screen_lm = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.screen_lm = parse::ParseInteger<int>(a, value());
     else if (a == "--warm-lm")
-      o.warm_lm = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.warm_lm = parse::ParseInteger<int>(a, value());
     else if (a == "--fused-size")
       o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-resolution")
-      o.fused_resolution = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.fused_resolution = parse::ParseInteger<int>(a, value());
     else if (a == "--fused-truncation")
       o.fused_truncation = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-normal-gap")
@@ -842,11 +853,8 @@ int Run(int argc, char** argv) {
     else if (a == "--fused-gradient-step")
       o.fused_gradient_step = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--fused-origin") {
-      const std::string v = value();
-      if (std::sscanf(v.c_str(), "%f,%f,%f", &o.fused_origin[0], &o.fused_origin[1],
-                      &o.fused_origin[2]) != 3) {
-        throw node::UsageError("--fused-origin needs X,Y,Z, got '" + v + "'");
-      }
+      const std::vector<double> v = parse::ParseDoubleList(a, value(), 3, 3);
+      for (int k = 0; k < 3; ++k) o.fused_origin[k] = static_cast<float>(v[k]);
     } else if (a == "--fused-normals") {
       const std::string v = value();
       if (v != "depth" && v != "volume") {
@@ -854,7 +862,7 @@ int Run(int argc, char** argv) {
       }
       o.fused_volume_normals = v == "volume";
     } else if (a == "--fused-step")
-      o.fused_step = static_cast<int>(node::ParseNumberOption(a, value()));
+      o.fused_step = parse::ParseInteger<int>(a, value());
     else
       throw node::UsageError("unknown option '" + a + "'");
   }

@@ -23,6 +23,7 @@
 #include "probeless/log/mcap_writer.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/image.h"
+#include "probeless/parse/number.h"
 
 namespace {
 
@@ -102,14 +103,20 @@ int main(int argc, char** argv) {
   std::string json_path;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
+    if (arg == "-h" || arg == "--help") {
+      std::printf("usage: log_bench [--frames N] [--chunk-size BYTES] [--dir DIR] [--json FILE]\n");
+      return 0;
+    }
     if (i + 1 >= argc) Usage(("missing value after " + arg).c_str());
     const std::string value = argv[++i];
     if (arg == "--frames") {
-      frames = std::atoi(value.c_str());
-      if (frames <= 0) Usage("--frames must be > 0");
+      const auto n = probeless::parse::TryParseInteger<int>(value, 1);
+      if (!n) Usage(("--frames expects a positive integer, got '" + value + "'").c_str());
+      frames = *n;
     } else if (arg == "--chunk-size") {
-      chunk_size = std::strtoull(value.c_str(), nullptr, 10);
-      if (chunk_size == 0) Usage("--chunk-size must be > 0");
+      const auto n = probeless::parse::TryParseInteger<uint64_t>(value, 1);
+      if (!n) Usage(("--chunk-size expects a positive integer, got '" + value + "'").c_str());
+      chunk_size = *n;
     } else if (arg == "--dir") {
       dir = value;
     } else if (arg == "--json") {

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cctype>
 #include <climits>
+#include <cstdio>
 #include <cstdlib>
 #include <map>
 #include <mutex>
@@ -282,11 +283,37 @@ struct Node::Impl {
   }
 };
 
-Node::Node(int argc, char** argv, std::string_view default_name)
-    : Node(std::vector<std::string>(argv, argv + argc), default_name) {}
+Node::Node(int argc, char** argv, std::string_view default_name, std::string_view usage)
+    : Node(std::vector<std::string>(argv, argv + argc), default_name, usage) {}
 
-Node::Node(const std::vector<std::string>& argv, std::string_view default_name)
+namespace {
+
+// --help before --ros-args: the usage and the ROS-style arguments every node takes, then exit 0.
+void HandleHelp(const std::vector<std::string>& argv, std::string_view name,
+                std::string_view usage) {
+  for (size_t i = 1; i < argv.size() && argv[i] != "--ros-args"; ++i) {
+    if (argv[i] != "-h" && argv[i] != "--help") continue;
+    if (usage.empty()) {
+      std::printf("usage: %.*s [--ros-args ...]\n", static_cast<int>(name.size()), name.data());
+    } else {
+      std::printf("%.*s", static_cast<int>(usage.size()), usage.data());
+      if (usage.back() != '\n') std::printf("\n");
+    }
+    std::printf(
+        "node arguments (after --ros-args): -r/--remap FROM:=TO (topics; __node:=NAME, "
+        "__ns:=/NS), -p/--param NAME:=VALUE, --params-file FILE, --log-level [LOGGER:=]LEVEL\n"
+        "parameters and topics of this node: the comment at the top of its main.cpp and docs/\n");
+    std::fflush(stdout);
+    std::exit(0);
+  }
+}
+
+}  // namespace
+
+Node::Node(const std::vector<std::string>& argv, std::string_view default_name,
+           std::string_view usage)
     : impl_(std::make_unique<Impl>()) {
+  HandleHelp(argv, default_name, usage);
   impl_->Init(argv, default_name);
   InstallSignalHandlers();
   // Declare log_level so it shows in introspection (its value was applied in Init).

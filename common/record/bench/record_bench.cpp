@@ -32,12 +32,14 @@
 #include "probeless/bus/bus.h"
 #include "probeless/log/mcap_reader.h"
 #include "probeless/msgs/image.h"
+#include "probeless/parse/number.h"
 #include "probeless/record/recorder.h"
 
 namespace {
 
 namespace bus = probeless::bus;
 namespace log = probeless::log;
+namespace parse = probeless::parse;
 namespace msgs = probeless::msgs;
 namespace record = probeless::record;
 using Clock = std::chrono::steady_clock;
@@ -262,14 +264,19 @@ int Run(int argc, char** argv) {
       if (i + 1 >= argc) throw std::runtime_error("option " + arg + " needs a value");
       return argv[++i];
     };
-    if (arg == "--seconds") {
-      config.seconds = std::stod(value());
+    if (arg == "-h" || arg == "--help") {
+      std::printf(
+          "usage: record_bench [--seconds S] [--streams N] [--fps F] [--max-fps F] [--dir DIR]\n"
+          "                    [--compressions none,zstd,lz4] [--json OUT] [--keep]\n");
+      return 0;
+    } else if (arg == "--seconds") {
+      config.seconds = parse::ParsePositiveDouble(arg, value());
     } else if (arg == "--streams") {
-      config.streams = std::stoi(value());
+      config.streams = parse::ParseInteger<int>(arg, value(), 1);
     } else if (arg == "--fps") {
-      config.fps = std::stod(value());
+      config.fps = parse::ParsePositiveDouble(arg, value());
     } else if (arg == "--max-fps") {
-      config.max_fps = std::stod(value());
+      config.max_fps = parse::ParseDouble(arg, value(), 0);
     } else if (arg == "--dir") {
       config.dir = value();
     } else if (arg == "--compressions") {

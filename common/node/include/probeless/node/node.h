@@ -144,9 +144,13 @@ class Node {
   // Parses argv (argv[0] is the program) as described at the top of this file and reads every
   // params file. `default_name` is used unless remapped by __node. Installs the signal handlers.
   // Throws NodeError on any malformed argument or file.
-  Node(int argc, char** argv, std::string_view default_name);
+  // -h or --help among the node's own arguments (before --ros-args) prints `usage` (a node's own
+  // options; empty: "usage: <default_name> [--ros-args ...]") and the --ros-args syntax to stdout
+  // and exits 0 before anything else happens, so every node answers --help.
+  Node(int argc, char** argv, std::string_view default_name, std::string_view usage = {});
   // Same with the arguments as strings (argv[0] first).
-  Node(const std::vector<std::string>& argv, std::string_view default_name);
+  Node(const std::vector<std::string>& argv, std::string_view default_name,
+       std::string_view usage = {});
   ~Node();
   Node(const Node&) = delete;
   Node& operator=(const Node&) = delete;
