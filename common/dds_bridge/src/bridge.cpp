@@ -9,6 +9,7 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <regex>
 #include <set>
 #include <thread>
@@ -17,6 +18,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/log/cdr.h"
 #include "probeless/log/ros2.h"
+#include "probeless/parse/number.h"
 
 namespace probeless::dds_bridge {
 namespace {
@@ -95,9 +97,9 @@ QosRule ParseQosRule(std::string_view text) {
   }
   if (!parts.empty() && !parts[0].empty()) rule.reliability = ParseReliability(parts[0]);
   if (parts.size() > 1 && !parts[1].empty()) {
-    char* end = nullptr;
-    const long depth = std::strtol(parts[1].c_str(), &end, 10);
-    if (*end != '\0' || depth < 1 || depth > 1000) {
+    const std::optional<long> parsed = parse::TryParseInteger<long>(parts[1], 1, 1000);
+    const long depth = parsed.value_or(0);
+    if (!parsed) {
       throw DdsBridgeError("qos rule '" + std::string(text) + "': depth '" + parts[1] +
                            "' is not an integer in 1..1000");
     }
@@ -171,9 +173,9 @@ int ResolveDomainId(int domain_id) {
   }
   const char* env = std::getenv("ROS_DOMAIN_ID");
   if (env == nullptr || *env == '\0') return 0;
-  char* end = nullptr;
-  const long value = std::strtol(env, &end, 10);
-  if (*end != '\0' || value < 0 || value > 232) {
+  const std::optional<int> parsed = parse::TryParseInteger<int>(env, 0, 232);
+  const int value = parsed.value_or(0);
+  if (!parsed) {
     throw DdsBridgeError(std::string("ROS_DOMAIN_ID '") + env +
                          "' is not a domain id (expected 0..232)");
   }

@@ -8,6 +8,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "probeless/parse/number.h"
+
 namespace probeless::eval {
 
 namespace {
@@ -44,12 +46,8 @@ YAML::Node LoadFile(const std::string& path, const std::string& display) {
 // A finite number, or nullopt (text that is not entirely a number).
 std::optional<double> Number(const YAML::Node& node) {
   if (!node.IsScalar()) return std::nullopt;
-  const std::string& s = node.Scalar();
-  if (s.empty()) return std::nullopt;
-  char* end = nullptr;
-  const double v = std::strtod(s.c_str(), &end);
-  if (end != s.c_str() + s.size() || !std::isfinite(v)) return std::nullopt;
-  return v;
+  // parse::'s rules: strtod also took " 1", "0x10" and a trailing newline of a block scalar.
+  return parse::TryParseDouble(node.Scalar());
 }
 
 double PositiveNumber(const YAML::Node& node, const Where& where) {

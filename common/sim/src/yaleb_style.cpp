@@ -9,9 +9,12 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <sstream>
+#include <string_view>
 
 #include "probeless/dataset/yaleb.h"
+#include "probeless/parse/number.h"
 #include "probeless/raytrace/mesh.h"
 #include "probeless/raytrace/render.h"
 #include "probeless/raytrace/scene.h"
@@ -113,7 +116,13 @@ IctHead LoadIctHead(const std::string& path) {
       std::vector<uint32_t> face;
       std::string word;
       while (words >> word) {
-        const long index = std::strtol(word.c_str(), nullptr, 10);
+        // The vertex part of "v/vt/vn", whole: strtol took "12abc" as 12 and "abc" as 0.
+        const std::optional<long> parsed =
+            parse::TryParseInteger<long>(std::string_view(word).substr(0, word.find('/')));
+        if (!parsed || *parsed == 0) {
+          Fail(path + ":" + std::to_string(line_number) + ": malformed face index '" + word + "'");
+        }
+        const long index = *parsed;
         const long resolved = index < 0 ? static_cast<long>(positions.size()) + index : index - 1;
         if (resolved < 0 || resolved >= static_cast<long>(positions.size())) {
           Fail(path + ":" + std::to_string(line_number) + ": face index out of range");
