@@ -2,9 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdint>
 #include <iterator>
-#include <vector>
 
 namespace probeless::recon {
 
@@ -81,16 +79,44 @@ bool SolveCholesky(const double a_upper[21], const double b[6], double x[6], dou
 
 constexpr int kTasks = 16;
 
+// ICP's projective association at one relative pose (frame camera -> model camera), level 0.
+struct Association {
+  float r[9], t[3];
+  const Vec3Image* points;
+  const Vec3Image* normals;
+  Intrinsics k;
+  float dmax2, cos_max;
+
+  // The frame point v with normal nv (frame camera) finds a model pair: the gates of TrackIcp.
+  bool Pairs(Vec3f v, Vec3f nv) const {
+    const Vec3f p{r[0] * v.x + r[1] * v.y + r[2] * v.z + t[0],
+                  r[3] * v.x + r[4] * v.y + r[5] * v.z + t[1],
+                  r[6] * v.x + r[7] * v.y + r[8] * v.z + t[2]};
+    if (p.z <= 0) return false;
+    const int w = points->width, h = points->height;
+    const float uf = k.fx * p.x / p.z + k.cx, vf = k.fy * p.y / p.z + k.cy;
+    if (!(uf >= -0.5f && uf < w - 0.5f && vf >= -0.5f && vf < h - 0.5f)) return false;
+    const int u = static_cast<int>(uf + 0.5f), vv = static_cast<int>(vf + 0.5f);
+    const Vec3f q = points->At(u, vv), nq = normals->At(u, vv);
+    if (q.z <= 0 || (nq.x == 0 && nq.y == 0 && nq.z == 0)) return false;
+    const Vec3f d = p - q;
+    if (Dot(d, d) > dmax2) return false;
+    const Vec3f nr{r[0] * nv.x + r[1] * nv.y + r[2] * nv.z, r[3] * nv.x + r[4] * nv.y + r[5] * nv.z,
+                   r[6] * nv.x + r[7] * nv.y + r[8] * nv.z};
+    return Dot(nr, nq) >= cos_max;
+  }
+};
+
 // The point-to-plane normal matrix of the frame's own geometry, one pair per block x block
 // pixels: the block's mean point and its renormalised mean normal (blocks with fewer than half
 // of their pixels valid, or whose normals cancel - a crease - are skipped). Averaging divides the
 // normals' noise variance, which otherwise shows as a constraint in every direction (a floor and
 // a wall seen through Kinect-like noise look as constrained along their intersection as a real
 // kitchen's weakest direction), while piecewise-planar geometry keeps its normals.
-// `matched` (nullptr: every pixel), one byte per pixel: only pixels with a non-zero byte count, so
-// the matrix describes the part of the frame that found a model surface.
+// `match` (nullptr: every pixel): only the samples that find a model pair count, so the matrix
+// describes the part of the frame that constrains ICP's estimate.
 void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block,
-                          const uint8_t* matched, double normal_equations[21], int* pairs,
+                          const Association* match, double normal_equations[21], int* pairs,
                           float* mean_depth_m, ThreadPool* pool) {
   const int bw = vs.width / block, bh = vs.height / block;
   // Per task in fixed rows of blocks, summed in task order: deterministic for any thread count.
@@ -112,7 +138,7 @@ void FrameNormalEquations(const Vec3Image& vs, const Vec3Image& ns, int block,
           for (int x = bx * block; x < (bx + 1) * block; x += 2) {
             const Vec3f v = vs.At(x, y), nv = ns.At(x, y);
             if (v.z <= 0 || (nv.x == 0 && nv.y == 0 && nv.z == 0)) continue;
-            if (matched != nullptr && matched[static_cast<size_t>(y) * vs.width + x] == 0) continue;
+            if (match != nullptr && !match->Pairs(v, nv)) continue;
             p = p + v;
             n = n + nv;
             ++count;
@@ -176,8 +202,6 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
   for (const Vec3f& v : frame.vertices[offset].data) valid0 += v.z > 0;
   FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
                        nullptr, result.normal_equations, &result.pairs, &result.mean_depth_m, pool);
-  // Level-0 pixels paired in the latest iteration (the one `last` sums).
-  std::vector<uint8_t> matched(frame.vertices[offset].data.size());
   for (int l = levels - 1; l >= 0; --l) {
     const Vec3Image& vs = frame.vertices[offset + l];
     const Vec3Image& ns = frame.normals[offset + l];
@@ -197,8 +221,6 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
         for (int y = h * task / kTasks; y < h * (task + 1) / kTasks; ++y) {
           float a[21] = {}, b[6] = {}, r2 = 0;
           int n = 0;
-          uint8_t* matched_row = l == 0 ? matched.data() + static_cast<size_t>(y) * w : nullptr;
-          if (matched_row != nullptr) std::fill(matched_row, matched_row + w, uint8_t{0});
           for (int x = 0; x < w; ++x) {
             const Vec3f v = vs.At(x, y);
             const Vec3f nv = ns.At(x, y);
@@ -231,7 +253,6 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
             }
             r2 += e * e;
             ++n;
-            if (matched_row != nullptr) matched_row[x] = 1;
           }
           for (int i = 0; i < 21; ++i) out.a[i] += a[i];
           for (int i = 0; i < 6; ++i) out.b[i] += b[i];
@@ -265,8 +286,16 @@ IcpResult TrackIcp(const FramePyramid& frame, const ModelPyramid& model, const P
       if (step2 < 1e-9) break;
     }
   }
+  Association match;
+  for (int i = 0; i < 9; ++i) match.r[i] = static_cast<float>(rel.r[i]);
+  for (int i = 0; i < 3; ++i) match.t[i] = static_cast<float>(rel.t[i]);
+  match.points = &model.points[0];
+  match.normals = &model.normals[0];
+  match.k = model.intrinsics[0];
+  match.dmax2 = dmax2;
+  match.cos_max = cos_max;
   FrameNormalEquations(frame.vertices[offset], frame.normals[offset], options.observability_block,
-                       matched.data(), result.matched_normal_equations, &result.matched_pairs,
+                       &match, result.matched_normal_equations, &result.matched_pairs,
                        &result.matched_mean_depth_m, pool);
   result.inlier_fraction = valid0 > 0 ? static_cast<float>(last.n) / valid0 : 0.0f;
   result.rms_m = last.n > 0 ? static_cast<float>(std::sqrt(last.r2 / last.n)) : 0.0f;

@@ -56,10 +56,11 @@ struct IcpResult {
   double normal_equations[21] = {};
   int pairs = 0;
   float mean_depth_m = 0;
-  // The same matrix over the pixels ICP paired with the model in its last level-0 iteration only
-  // (a block counts when at least half of its samples are valid and paired): the geometry that
-  // actually constrained the estimate. Geometry the frame sees but the model lacks (outside the
-  // volume, not yet integrated) is in normal_equations but not here. Zero when ICP stopped early.
+  // The same matrix over the samples that find a model pair at the final estimate (the level-0
+  // association gates of the iterations; a block counts when at least half of its samples are
+  // valid and paired): the geometry that actually constrains the estimate. Geometry the frame
+  // sees but the model lacks (outside the volume, not yet integrated) is in normal_equations but
+  // not here. Zero when ICP stopped early (too few pairs, singular).
   double matched_normal_equations[21] = {};
   int matched_pairs = 0;
   float matched_mean_depth_m = 0;
