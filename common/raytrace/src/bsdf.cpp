@@ -162,10 +162,6 @@ Bsdf::Bsdf(Vec3 albedo, float f0, float roughness, Vec3 n, Vec3 wo)
   }
 }
 
-Vec3 Bsdf::Eval(Vec3 wi_world, float* pdf) const {
-  return EvalLocal(frame_.ToLocal(wi_world), pdf);
-}
-
 Vec3 Bsdf::EvalLocal(Vec3 wi, float* pdf) const {
   *pdf = 0;
   if (wi.z <= 0) return {};

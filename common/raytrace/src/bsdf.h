@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <numbers>
 
 #include "probeless/raytrace/geometry.h"
 
@@ -56,7 +57,15 @@ class Bsdf {
 
   // f(wo, wi) * max(0, n.wi) for unit wi (world); *pdf = the solid-angle density with which
   // Sample draws wi.
-  Vec3 Eval(Vec3 wi, float* pdf) const;
+  Vec3 Eval(Vec3 wi, float* pdf) const {
+    if (f0_ > 0) return EvalLocal(frame_.ToLocal(wi), pdf);
+    // Pure Lambert, inline (most surfaces): only the cosine is needed.
+    const float cos_i = Dot(wi, frame_.n);
+    *pdf = 0;
+    if (cos_i <= 0) return {};
+    *pdf = cos_i * (1 / std::numbers::pi_v<float>);
+    return albedo_ * *pdf;
+  }
   // Draws wi from the lobe mixture with three uniforms in [0, 1). Returns false (and no
   // direction) when the draw falls below the surface; else wi, weight = f cos / pdf and pdf.
   bool Sample(float u_lobe, float u1, float u2, Vec3* wi, Vec3* weight, float* pdf) const;

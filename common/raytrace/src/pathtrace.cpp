@@ -818,7 +818,10 @@ Frame PathTrace(const Scene& scene, const Camera& camera, const PathTraceOptions
         }
       }
       traced += tracer.Trace(start, rngs, radiance);
-      for (size_t k = 0; k < radiance.size(); ++k) sum[k % n] += radiance[k];
+      // The wave holds whole samples of the tile, pixel order within each (no division per path).
+      for (size_t k = 0; k < radiance.size(); k += n) {
+        for (size_t i = 0; i < n; ++i) sum[i] += radiance[k + i];
+      }
     }
     const float scale = options.exposure / static_cast<float>(spp);
     for (size_t i = 0; i < n; ++i) {
