@@ -89,7 +89,7 @@ function(probeless_add_fuzzer)
     set(_command ${F_NAME} -runs=0 ${F_CORPUS})
   elseif(PROBELESS_BUILD_TESTS AND F_CORPUS)
     add_executable(${F_NAME}_replay ${F_SOURCES} ${PROJECT_SOURCE_DIR}/tests/fuzz/replay_main.cpp)
-    target_link_libraries(${F_NAME}_replay PRIVATE ${F_LIBS})
+    target_link_libraries(${F_NAME}_replay PRIVATE ${F_LIBS} probeless_parse)
     set_target_properties(${F_NAME}_replay PROPERTIES RUNTIME_OUTPUT_DIRECTORY
                                                       ${CMAKE_BINARY_DIR}/tests)
     set(_command ${F_NAME}_replay ${F_CORPUS})
