@@ -28,6 +28,7 @@
 #include "probeless/face_light/yaleb.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/parse/number.h"
 #include "probeless/sh/sh.h"
 
 namespace fl = probeless::face_light;
@@ -70,12 +71,10 @@ struct Result {
 };
 
 double ParseNumber(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double value = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0') {
-    throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
-  }
-  return value;
+  // parse::'s rules: strtod also took "inf", "nan" and hexadecimal.
+  const auto value = probeless::parse::TryParseDouble(text);
+  if (!value) throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
+  return *value;
 }
 
 double Mean(const std::vector<double>& v) {

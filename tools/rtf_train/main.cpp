@@ -19,6 +19,7 @@
 #include "probeless/face_light/yaleb.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/parse/number.h"
 
 namespace fl = probeless::face_light;
 namespace ft = probeless::face_track;
@@ -59,12 +60,10 @@ void Progress(const std::string& label, double fraction) {
 }
 
 double ParseNumber(const std::string& flag, const std::string& text) {
-  char* end = nullptr;
-  const double value = std::strtod(text.c_str(), &end);
-  if (text.empty() || *end != '\0') {
-    throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
-  }
-  return value;
+  // parse::'s rules: strtod also took "inf", "nan" and hexadecimal.
+  const auto value = probeless::parse::TryParseDouble(text);
+  if (!value) throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
+  return *value;
 }
 
 int Run(int argc, char** argv) {

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "probeless/parse/number.h"
 #include "probeless/sh/sh.h"
 
 namespace probeless::face_light {
@@ -77,15 +78,12 @@ class Reader {
   }
 
   double Real(std::string_view word, std::string_view what) const {
-    const std::string copy(word);
-    char* end = nullptr;
-    errno = 0;
-    const double value = std::strtod(copy.c_str(), &end);
-    if (copy.empty() || end != copy.c_str() + copy.size() || errno == ERANGE ||
-        !std::isfinite(value)) {
-      Fail("bad " + std::string(what) + " '" + copy + "' (expected a finite number)");
+    // parse::'s rules (strtod also took hexadecimal).
+    const auto value = parse::TryParseDouble(word);
+    if (!value) {
+      Fail("bad " + std::string(what) + " '" + std::string(word) + "' (expected a finite number)");
     }
-    return value;
+    return *value;
   }
 
   int line_number() const { return line_number_; }

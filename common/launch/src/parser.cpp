@@ -13,12 +13,14 @@
 #include <fstream>
 #include <initializer_list>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "probeless/launch/launch.h"
+#include "probeless/parse/number.h"
 #include "substitution.h"
 
 namespace probeless::launch {
@@ -724,11 +726,9 @@ class Parser {
     }
     if (const Field* f = Find(fields, "respawn_delay")) {
       const std::string text = Text(file, scope, f->value, "respawn_delay");
-      char* end = nullptr;
-      errno = 0;
-      const double value = std::strtod(text.c_str(), &end);
-      if (text.empty() || *end != '\0' || errno != 0 || !std::isfinite(value) || value < 0 ||
-          value > 1e6) {
+      const std::optional<double> parsed = parse::TryParseDouble(text, 0, 1e6);
+      const double value = parsed.value_or(0);
+      if (!parsed) {
         Fail(file, f->value,
              "invalid respawn_delay '" + text + "' (expected a number of seconds >= 0)");
       }
@@ -736,10 +736,9 @@ class Parser {
     }
     if (const Field* f = Find(fields, "respawn_max_retries")) {
       const std::string text = Text(file, scope, f->value, "respawn_max_retries");
-      char* end = nullptr;
-      errno = 0;
-      const long value = std::strtol(text.c_str(), &end, 10);
-      if (text.empty() || *end != '\0' || errno != 0 || value < -1 || value > 1000000000) {
+      const std::optional<long> parsed = parse::TryParseInteger<long>(text, -1, 1000000000);
+      const long value = parsed.value_or(0);
+      if (!parsed) {
         Fail(file, f->value,
              "invalid respawn_max_retries '" + text +
                  "' (expected an integer >= 0, or -1 for unlimited)");
