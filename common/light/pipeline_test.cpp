@@ -124,6 +124,9 @@ light::ScenePipelineOptions SmallOptions() {
   o.transfer.directions = 16;  // fast enough for a unit test
   o.transfer.threads = 2;
   o.shadow.threads = 2;
+  // The compositions below call EstimateLight without the per-frame up direction: no prior here
+  // (its composition is tested in up_prior_test.cpp).
+  o.estimate.prior.weight = 0;
   return o;
 }
 

@@ -12,7 +12,8 @@
 //       central differences on noisy depth; no reconstruction needed).
 //   Both: `camera/camera_info` (msgs::CameraInfo, latest) and `camera/image` (msgs::Image rgb8 /
 //       bgr8 / mono8, latest; I_c of the estimation; a debug line if its sequence differs).
-// Outputs: `scene/light` (msgs::ShLight, white light in the camera frame, bands = param bands,
+// Outputs: `scene/light` (msgs::ShLight, camera frame, in the illuminant colour by the grey-world
+//   assumption unless grey_world_colour is false, bands = param bands,
 //   dominant direction, intensity, confidence; header of the triggering message) and, with
 //   publish_transfer, `scene/transfer` (msgs::TransferBuffer, the per-pixel T for differential
 //   rendering), and with publish_indirect `scene/indirect` (msgs::Image rgb32f, the one-bounce
@@ -94,10 +95,10 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
   // The light prior (light::LightPrior; chosen on the evaluation world's train / validation
   // splits, docs/light.md "Light prior").
-  eo.prior.weight = node.Param("prior_weight", 0.0);
-  eo.prior.zonal = {1.0f, static_cast<float>(node.Param("prior_z1", 0.0)),
-                    static_cast<float>(node.Param("prior_z2", 0.0)),
-                    static_cast<float>(node.Param("prior_z3", 0.0))};
+  eo.prior.weight = node.Param("prior_weight", static_cast<double>(eo.prior.weight));
+  eo.prior.zonal = {1.0f, static_cast<float>(node.Param("prior_z1", double{eo.prior.zonal[1]})),
+                    static_cast<float>(node.Param("prior_z2", double{eo.prior.zonal[2]})),
+                    static_cast<float>(node.Param("prior_z3", double{eo.prior.zonal[3]}))};
   po.grey_world_colour = node.Param("grey_world_colour", true);
   if (!(eo.prior.weight >= 0)) {
     throw node::UsageError("scene_light: prior_weight must be >= 0, got " +

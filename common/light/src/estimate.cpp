@@ -239,8 +239,9 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   std::vector<double> l(cc, 0.0), ata(static_cast<size_t>(cc) * cc), atb(cc);
   std::vector<std::array<double, sh::kMaxCoefficients>> penalty;  // non-negativity rows
   double base_trace = 0;
-  // LightPrior's ratios rho_k (rho_0 unused); empty: no prior.
+  // LightPrior's ratios rho_k (rho_0 unused; empty: no prior) and its current weight.
   std::vector<double> rho;
+  double prior_scale = 0;
   {
     const Vec3f& u = options.prior.up;
     const double un = std::sqrt(double(u[0]) * u[0] + double(u[1]) * u[1] + double(u[2]) * u[2]);
@@ -270,8 +271,8 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
         for (int c = 0; c < cc; ++c) ata[r * cc + c] += mu2 * y[r] * y[c];
       }
     }
-    if (!rho.empty()) {  // rows sqrt(w) (e_k - rho_k e_0), target 0
-      const double w = options.prior.weight * (trace > 0 ? trace / cc : 1.0);
+    if (!rho.empty() && prior_scale > 0) {  // rows sqrt(w) (e_k - rho_k e_0), target 0
+      const double w = prior_scale * (trace > 0 ? trace / cc : 1.0);
       for (int k = 1; k < cc; ++k) {
         ata[k * cc + k] += w;
         ata[k * cc + 0] -= w * rho[k];
@@ -291,12 +292,36 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     Residuals(cc, rows.data(), targets.data(), l.data(), m, residual.data());
   };
   if (!solve()) return e;
+  // The prior weighs as much as the data leaves unexplained: options.prior.weight times
+  // (1 - R^2) / R^2 of the current fit (a MAP weight sigma^2 / tau^2 with the signal's variance
+  // as the unit), so clean data that pins the light down is left alone and texture, bounce light
+  // and albedo ambiguity give way to the prior.
+  auto update_prior = [&]() {
+    residuals();
+    double sw = 0, swr2 = 0, swt = 0, swt2 = 0;
+    for (size_t i = 0; i < m; ++i) {
+      sw += weight[i];
+      swr2 += double(weight[i]) * residual[i] * residual[i];
+      swt += double(weight[i]) * targets[i];
+    }
+    const double mean_t = sw > 0 ? swt / sw : 0;
+    for (size_t i = 0; i < m; ++i) {
+      swt2 += double(weight[i]) * (targets[i] - mean_t) * (targets[i] - mean_t);
+    }
+    const double r2 = swt2 > 0 ? std::clamp(1.0 - swr2 / swt2, 0.0, 1.0) : 0.0;
+    prior_scale = options.prior.weight * (1 - r2) / std::max(r2, 0.05);
+  };
+  if (!rho.empty()) {
+    update_prior();
+    if (!solve()) return e;
+  }
   if (options.robust) {
     double rms_t = 0;
     for (float t : targets) rms_t += double(t) * t;
     rms_t = std::sqrt(rms_t / m);
     const int iterations = options.huber_iterations + options.tukey_iterations;
     for (int it = 0; it < iterations; ++it) {
+      if (!rho.empty()) update_prior();  // under the previous weights
       residuals();
       for (size_t i = 0; i < m; ++i) abs_r[i] = std::abs(residual[i]);
       // MAD scale from every k-th residual (at most ~4096 of them: the median's cost otherwise

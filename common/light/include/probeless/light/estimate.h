@@ -20,10 +20,12 @@ namespace probeless::light {
 // a light that is rotationally symmetric about `up` with the band ratios `zonal`. It enters as
 // rows sqrt(w) (l_k - rho_k l_0) = 0 for every coefficient k >= 1, rho_k = (zonal[l] / (2l + 1))
 // Y_k(up) / Y_00 (the zonal function sum_l zonal[l] P_l(up . d) times the light's own band 0), so
-// the light's level stays the data's. Defaults chosen on the evaluation world's train split
-// (docs/light.md, "Light prior").
+// the light's level stays the data's; its weight grows with what the fit leaves unexplained.
+// Defaults chosen on the evaluation world's train split (docs/light.md, "Light prior").
 struct LightPrior {
-  // Weight relative to trace(T^T T) / coefficient count (as EstimateOptions::ridge); 0 = off.
+  // Weight relative to trace(T^T T) / coefficient count (as EstimateOptions::ridge) per unit of
+  // (1 - R^2) / R^2, the share of the targets' variance the fit leaves unexplained (R^2 clamped to
+  // >= 0.05; updated with every reweighting): data the model explains keeps its light; 0 = off.
   double weight = 0;
   // Unit up direction in the frame of T (the camera frame); (0, 0, 0) = no prior this frame.
   Vec3f up{0, 0, 0};
