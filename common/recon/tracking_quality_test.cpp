@@ -1,7 +1,8 @@
 // The tracking-quality test (tracking_quality.h): the observability of analytic scenes, the
 // score and state contract on crafted ICP results, and the pipeline on crafted drifting
 // sequences: a camera sliding along a floor and a wall after the one object that pinned the slide
-// left the view (ICP converges, the pose silently drifts), and frames of another take spliced
+// left the view (ICP converges, the pose silently drifts), the same slow slide while the frame
+// still sees a wall that pins it but lies outside the volume, and frames of another take spliced
 // into a smooth sequence (ICP converges 12 cm off). The detector must fire within 2 frames,
 // stop integrating and relocalise; each check is paired with the plain ICP verdict that misses it.
 #include "probeless/recon/tracking_quality.h"
