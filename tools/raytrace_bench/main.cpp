@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <fstream>
 #include <stdexcept>
@@ -44,6 +45,12 @@ struct Row {
 
 // Process CPU time of all threads: with wall time it shows how much other load slowed a row.
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+// The machine's 1-minute load average (-1 if unknown): the figures are only comparable when low.
+double LoadAverage() {
+  double load[1];
+  return getloadavg(load, 1) == 1 ? load[0] : -1;
+}
 
 // Writes 8-bit sRGB as a binary PPM.
 void WritePpm(const std::string& path, const raytrace::Frame& f) {
@@ -194,6 +201,8 @@ int Run(int argc, char** argv) {
     std::printf("path-trace room: %zu triangles, %d objects, 1 sun disc + sky + 2 area lights\n",
                 room.triangle_count(), room.object_count());
   }
+  const double load = LoadAverage();
+  std::printf("1-min load average at the end: %.2f\n", load);
   std::printf("%-50s %10s %10s %14s %10s\n", "row", "fps", "ms/frame", "Mrays/s", "cpu s");
   for (const Row& r : rows) {
     const double fps = r.frames > 0 ? r.frames / r.seconds : 0;
@@ -208,7 +217,8 @@ int Run(int argc, char** argv) {
         << ",\n  \"height\": " << scenario.camera.height
         << ",\n  \"shadows\": " << (options.shadows ? "true" : "false")
         << ",\n  \"triangles\": " << simulator.scene().triangle_count()
-        << ",\n  \"threads\": " << threads << ",\n  \"frames\": " << n << ",\n  \"rows\": [\n";
+        << ",\n  \"threads\": " << threads << ",\n  \"frames\": " << n
+        << ",\n  \"load_1min\": " << load << ",\n  \"rows\": [\n";
     for (size_t i = 0; i < rows.size(); ++i) {
       const Row& r = rows[i];
       out << "    {\"name\": \"" << r.name << "\", \"seconds\": " << r.seconds
@@ -222,8 +232,9 @@ int Run(int argc, char** argv) {
     if (pathtrace) {
       out << ",\n  \"pathtrace\": {\"scene\": \"pathtrace_room\", \"width\": " << room_camera.width
           << ", \"height\": " << room_camera.height << ", \"samples_per_pixel\": " << pt_spp
-          << ", \"max_bounces\": " << pt.max_bounces << ", \"triangles\": " << room.triangle_count()
-          << ", \"threads\": " << threads << "}";
+          << ", \"max_bounces\": " << pt.max_bounces
+          << ", \"russian_roulette_after\": " << pt.russian_roulette_after
+          << ", \"triangles\": " << room.triangle_count() << ", \"threads\": " << threads << "}";
     }
     out << "\n}\n";
     if (!out) throw std::runtime_error("cannot write '" + json + "'");
