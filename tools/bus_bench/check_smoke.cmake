@@ -1,6 +1,9 @@
 # ctest bus_bench_smoke: runs `bus_bench --smoke --json JSON` and checks the JSON: an array of rows,
-# each with the required keys and sane values, lost == 0 in every 1->1 row, and rows of every
-# transport (iceoryx only if built with it and its RouDi could start).
+# each with the required keys and sane values, lost == 0 in every 1->1 row, a probeless
+# slow_subscriber row whose fast subscribers lost nothing but what their own full queues dropped
+# (lost == fast_transport_drops: a fast subscriber descheduled for its queue's depth of periods by
+# other load is slow then, and the bus drops for it by its policy; any other miss is the bus's),
+# and rows of every transport (iceoryx only if built with it and its RouDi could start).
 # Usage: cmake -DBUS_BENCH=<exe> -DJSON=<file> [-DEXPECT_ICEORYX=ON] -P check_smoke.cmake
 cmake_minimum_required(VERSION 3.25)
 
@@ -55,8 +58,25 @@ foreach(i RANGE ${last})
   if(subscribers EQUAL 1 AND NOT lost EQUAL 0)
     message(FATAL_ERROR "row ${i} (${transport} ${size} B ${mode}): lost ${lost} in a 1->1 row")
   endif()
+  string(JSON scenario ERROR_VARIABLE scenario_error GET "${text}" ${i} scenario)
+  if(NOT scenario_error AND scenario STREQUAL "slow_subscriber" AND transport STREQUAL "probeless")
+    string(JSON fast_drops ERROR_VARIABLE drops_error GET "${text}" ${i} fast_transport_drops)
+    if(drops_error)
+      message(FATAL_ERROR "row ${i} (probeless slow_subscriber) lacks fast_transport_drops")
+    endif()
+    string(JSON loan_failures GET "${text}" ${i} loan_failures)
+    if(NOT lost EQUAL fast_drops OR NOT loan_failures EQUAL 0)
+      message(FATAL_ERROR "row ${i} (probeless slow_subscriber): fast subscribers lost ${lost}, "
+                          "of which their own full queues dropped ${fast_drops} (loan failures "
+                          "${loan_failures}): the bus lost a fast subscriber's message")
+    endif()
+    set(seen_slow ON)
+  endif()
   list(APPEND seen_transports ${transport})
 endforeach()
+if(NOT seen_slow)
+  message(FATAL_ERROR "no probeless slow_subscriber row")
+endif()
 
 foreach(t probeless uds)
   if(NOT t IN_LIST seen_transports)

@@ -81,6 +81,13 @@ struct SubResult {
   int64_t transport_drops[kMaxTopics] = {};  // as counted by the transport, -1 if it does not
   int64_t first_recv_ns[kMaxTopics] = {};
   int64_t last_recv_ns[kMaxTopics] = {};
+  // Longest interval between two consecutive takes of the topic (the end marker included): a
+  // subscriber that took nothing for (queue depth) periods of a paced phase was itself slow then.
+  int64_t max_gap_ns[kMaxTopics] = {};
+  // Time the receiving threads waited on a run queue (runnable, not running) during the phase,
+  // from /proc/thread-self/schedstat; -1 if the kernel does not provide it. Separates a
+  // subscriber descheduled by other load from one the transport failed to wake.
+  std::atomic<int64_t> run_delay_ns{0};
   LatencyRecord records[kMaxRecords];
 };
 
@@ -137,6 +144,9 @@ bool SetRealtime(bool fifo, int nice = 0);
 uint32_t FillByte(uint32_t seq, uint32_t topic);
 // True if every byte of payload[kHeaderBytes, size) equals `fill` (reads every byte).
 bool PayloadMatches(std::span<const std::byte> payload, uint32_t fill);
+
+// Run-queue wait of the calling thread so far in nanoseconds (schedstat), -1 if unavailable.
+int64_t ThreadRunDelayNs();
 
 // Role process entry points (`bus_bench --role pub|sub --ctl-fd N --index I`); return exit codes.
 int RunPublisherRole(Control& control, uint32_t index);

@@ -29,6 +29,18 @@ struct Row {
   int64_t slow_received = -1;         // slow_subscriber: what the slow one got …
   int64_t slow_lost = -1;             // … and missed (sequence gaps)
   int64_t slow_transport_drops = -1;  // … as counted by the transport itself (-1: not counted)
+  // slow_subscriber: what the fast subscribers' misses (`lost`) were. `fast_transport_drops` of
+  // them were drops of the fast subscribers' own full queues counted by the transport (-1: it
+  // does not count); `fast_max_gap_us` is the longest a fast subscriber went without taking a
+  // message and `fast_run_delay_us` the longest run-queue wait of one (-1: not measured). A
+  // subscriber that took nothing for (depth - 1) periods and waited that long on a run queue was
+  // itself slow (descheduled): the bus drops for it by its queue policy, which is not a loss of a
+  // fast subscriber. `fast_unexplained` counts every other miss of a fast subscriber: the bus's
+  // (target 0).
+  int64_t fast_transport_drops = -1;
+  double fast_max_gap_us = -1;
+  double fast_run_delay_us = -1;
+  int64_t fast_unexplained = -1;
 };
 
 // Latency of a bare cross-process hand-over on this machine (no transport), microseconds.

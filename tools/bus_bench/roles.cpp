@@ -9,6 +9,7 @@
 #include <climits>
 #include <cstring>
 #include <ctime>
+#include <fstream>
 #include <memory>
 #include <stdexcept>
 #include <thread>
@@ -83,6 +84,14 @@ bool PayloadMatches(std::span<const std::byte> payload, uint32_t fill) {
   for (size_t i = words * 8; i < n; ++i) tail += static_cast<uint8_t>(p[i]);
   const uint64_t pattern = uint64_t{fill} * 0x0101010101010101ull;
   return sum == pattern * words && tail == uint64_t{fill} * (n - words * 8);
+}
+
+int64_t ThreadRunDelayNs() {
+  // "time on CPU, time waiting on a run queue, time slices" (Documentation/scheduler/sched-stats).
+  std::ifstream in("/proc/thread-self/schedstat");
+  int64_t on_cpu = 0, waiting = 0;
+  if (!(in >> on_cpu >> waiting)) return -1;
+  return waiting;
 }
 
 namespace {
@@ -191,12 +200,19 @@ class PublisherRole {
     r = PubResult{};
     const int64_t start = MonoNs() + 2'000'000 + index_ * ph.stagger_ns;
     if (ph.period_ns > 0) {
+      int64_t tick = start;
       for (uint32_t k = 1; k <= ph.count; ++k) {
-        const int64_t tick = start + (k - 1) * ph.period_ns;
         if (c_.failed.load(std::memory_order_relaxed)) throw std::runtime_error("stopped");
         WaitUntil(tick, ph.busy);
-        r.max_late_ns = std::max(r.max_late_ns, MonoNs() - tick);
+        const int64_t woke = MonoNs();
+        r.max_late_ns = std::max(r.max_late_ns, woke - tick);
         for (uint32_t t = 0; t < channels_.size(); ++t) PublishOne(ph, t, k);
+        // The next message one period after this one at the earliest, like a camera: a publisher
+        // descheduled for N periods must not publish the N ticks it missed back to back. That
+        // burst (1.5 MB frames at memset speed, ~10x the paced rate) overflows every depth-4
+        // queue whoever reads it, and bus_bench then counted drop-oldest under an unpaced burst
+        // as fast-subscriber losses of a 1 kHz stream (issue #22's `lost: 1`).
+        tick = std::max(tick, woke) + ph.period_ns;
       }
     } else {
       WaitUntil(start, ph.busy);
@@ -359,9 +375,10 @@ class SubscriberRole {
     r.n_records.store(0);
     for (uint32_t g = 0; g < kMaxTopics; ++g) {
       r.received[g] = r.checksum_errors[g] = r.stale[g] = 0;
-      r.first_recv_ns[g] = r.last_recv_ns[g] = 0;
+      r.first_recv_ns[g] = r.last_recv_ns[g] = r.max_gap_ns[g] = 0;
       r.transport_drops[g] = 0;
     }
+    r.run_delay_ns.store(0);
     c_.acked[index_].store(0);
     // A busy-poll subscriber owns its core; under SCHED_FIFO it would starve the kernel's per-CPU
     // threads and hit RT throttling, so it polls at nice -20 instead.
@@ -403,6 +420,21 @@ class SubscriberRole {
     const uint32_t pub = g / c_.topics_per_pub;
     const bool slow = (ph.slow_mask & (1u << index_)) != 0;
     bool draining = false;
+    int64_t previous_take_ns = 0;
+    const int64_t run_delay_before = ThreadRunDelayNs();
+    // Every way out of the loop adds this thread's run-queue wait to the subscriber's.
+    struct RunDelay {
+      int64_t before;
+      std::atomic<int64_t>& total;
+      ~RunDelay() {
+        const int64_t after = ThreadRunDelayNs();
+        int64_t sum = total.load();
+        int64_t next;
+        do {  // -1 sticks: one thread without schedstat makes the sum unknown
+          next = (before < 0 || after < 0 || sum < 0) ? -1 : sum + (after - before);
+        } while (!total.compare_exchange_weak(sum, next));
+      }
+    } run_delay{run_delay_before, r.run_delay_ns};
     for (;;) {
       auto data =
           (ph.busy || draining) ? ch.Receive(false, 0) : ch.Receive(true, kBlockingTimeoutNs);
@@ -421,6 +453,10 @@ class SubscriberRole {
         ch.Release();
         continue;
       }
+      if (previous_take_ns != 0) {
+        r.max_gap_ns[g] = std::max(r.max_gap_ns[g], now - previous_take_ns);
+      }
+      previous_take_ns = now;
       if (h.seq == kEndMarker) {  // the publisher's last message of this phase on this topic
         ch.Release();
         return;
