@@ -55,7 +55,8 @@
 // --filter-angle, --filter-view, --filter-jump), --temporal N / --forgetting F
 // (light::TemporalLightEstimator fed with the N - 1 frames before each evaluated one, camera
 // rotation from the simulator), --smooth-radius / --normal-step (normals of the sensor depth),
-// --no-balance. --light-model distant|point|auto (light::EstimateSceneLight; default auto;
+// --no-balance. --prior-weight W: the light prior's weight (0 = off; default the node's).
+// --light-model distant|point|auto (light::EstimateSceneLight; default auto;
 // --temporal implies distant):
 // the near-field point-lamp fit (docs/light.md, "Near-field lamps"), --lamps K (1 or 2),
 // --point-rows N (rows of the point fit, PointLightOptions::max_rows); adds
@@ -172,9 +173,10 @@ struct Options {
   bool fused_volume_normals = false;
   float fused_normal_gap = 0.03f;
   float fused_gradient_step = 1.0f;
-  int temporal = 1;         // --temporal N: TemporalLightEstimator over N consecutive frames
-  float forgetting = 0.5f;  // --forgetting F
-  bool no_balance = false;  // --no-balance: no normal-orientation balancing (ablation)
+  int temporal = 1;          // --temporal N: TemporalLightEstimator over N consecutive frames
+  float forgetting = 0.5f;   // --forgetting F
+  bool no_balance = false;   // --no-balance: no normal-orientation balancing (ablation)
+  double prior_weight = -1;  // --prior-weight W: LightPrior::weight (-1 = the node's default)
   bool mix = false;  // --mix: hybrids of clean and sensor inputs (which sensor effect costs what)
   light::LightModel light_model = light::LightModel::kAuto;  // --light-model
   bool light_model_set = false;                              // --light-model given
@@ -746,7 +748,10 @@ int Run(int argc, char** argv) {
       o.forgetting = static_cast<float>(node::ParseNumberOption(a, value()));
     else if (a == "--no-balance")
       o.no_balance = true;
-    else if (a == "--mix")
+    else if (a == "--prior-weight") {
+      o.prior_weight = node::ParseNumberOption(a, value());
+      if (!(o.prior_weight >= 0)) throw node::UsageError("--prior-weight must be >= 0");
+    } else if (a == "--mix")
       o.mix = true;
     else if (a == "--light-model") {
       const std::string v = value();
@@ -882,11 +887,13 @@ int Run(int argc, char** argv) {
     if (o.light_model_set) throw node::UsageError("--reliability needs --light-model distant");
     o.light_model = light::LightModel::kDistant;  // the row weights are EstimateLight's
   }
-  light::EstimateOptions eo;
+  light::EstimateOptions eo =
+      light::ScenePipelineOptions{}.estimate;  // the node's (light prior on)
   if (o.grey_world) eo.albedo_groups = 0;
   eo.albedo_invariant = o.invariant_albedo;
   if (o.albedo_groups >= 0) eo.albedo_groups = o.albedo_groups;
   if (o.no_balance) eo.balance_normals = false;
+  if (o.prior_weight >= 0) eo.prior.weight = o.prior_weight;
   light::DepthGeometryOptions dgo = o.depth_geometry;
   dgo.smooth_radius = o.smooth_radius;
   dgo.step = o.normal_step;
