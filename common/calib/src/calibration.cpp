@@ -113,7 +113,7 @@ Intrinsics ReadRosYaml(const std::string& path, const std::string& text) {
   return intrinsics;
 }
 
-Intrinsics ReadFileStorage(const std::string& path) {
+Intrinsics ReadFileStorageOrThrow(const std::string& path) {
   cv::FileStorage storage;
   try {
     storage.open(path, cv::FileStorage::READ);
@@ -159,6 +159,19 @@ Intrinsics ReadFileStorage(const std::string& path) {
   if (!w.empty()) intrinsics.width = CheckedSize(static_cast<double>(w), path, "image_width");
   if (!h.empty()) intrinsics.height = CheckedSize(static_cast<double>(h), path, "image_height");
   return intrinsics;
+}
+
+// OpenCV's parser lets standard exceptions out of corrupt files (a std::length_error from a
+// garbled scalar, found by calibration_fuzz): bad input, reported as such.
+Intrinsics ReadFileStorage(const std::string& path) {
+  try {
+    return ReadFileStorageOrThrow(path);
+  } catch (const CalibrationError&) {
+    throw;
+  } catch (const std::exception& e) {
+    Fail(path,
+         " is not a readable OpenCV FileStorage YAML/XML file (" + std::string(e.what()) + ")");
+  }
 }
 
 }  // namespace

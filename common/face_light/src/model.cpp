@@ -48,6 +48,7 @@ class Reader {
         while (i < line.size() && line[i] != ' ') ++i;
         if (i > start) words.push_back(line.substr(start, i - start));
       }
+      if (words.empty()) continue;  // a line of spaces is blank (found by face_model_fuzz)
       return words;
     }
     ++line_number_;
