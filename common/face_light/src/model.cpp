@@ -337,8 +337,8 @@ FaceLightModel ParseModel(std::string_view text, std::string_view name) {
     model.residual_rms.push_back(static_cast<float>(residual));
     model.rtf.push_back(t);
     for (int n = 0; n < dn; ++n) {
-      model.direction_rtf.push_back(
-          static_cast<float>(reader.Real(v[3 + kRtfCoefficients + n], "direction RTF coefficient")));
+      model.direction_rtf.push_back(static_cast<float>(
+          reader.Real(v[3 + kRtfCoefficients + n], "direction RTF coefficient")));
     }
   }
   reader.Field("end", 0);
