@@ -68,6 +68,17 @@ struct TiltedView {
     }
   }
   light::GeometryView View() const { return {w, h, k, depth, normals, {}}; }
+  // The pipeline's G-buffer input with image `grey` (borrowed; no colour).
+  light::SceneFrame Input(std::span<const float> grey) const {
+    light::SceneFrame f;
+    f.width = w;
+    f.height = h;
+    f.intrinsics = k;
+    f.grey = grey;
+    f.gbuffer_depth = depth;
+    f.gbuffer_normals = normals;
+    return f;
+  }
 };
 
 TEST(UpDirection, FindsTheFloorOfATiltedRolledCamera) {
@@ -182,14 +193,8 @@ TEST(ScenePipeline, GreyWorldColourIsTheMeanLinearColour) {
   o.transfer.directions = 16;
   o.light_model = light::LightModel::kDistant;
   o.shadow.enabled = false;
-  light::SceneFrame f;
-  f.width = view.w;
-  f.height = view.h;
-  f.intrinsics = view.k;
-  f.grey = grey;
+  light::SceneFrame f = view.Input(grey);
   f.colour = colour;
-  f.gbuffer_depth = view.depth;
-  f.gbuffer_normals = view.normals;
   light::ScenePipeline pipeline(o);
   const auto& r = pipeline.Process(f);
   const double lin[3] = {light::SrgbToLinear(200), light::SrgbToLinear(120),
@@ -221,13 +226,7 @@ TEST(ScenePipeline, PriorIsOnByDefaultAboutTheEstimatedUp) {
   o.transfer.directions = 16;
   o.light_model = light::LightModel::kDistant;
   o.shadow.enabled = false;
-  light::SceneFrame f;
-  f.width = view.w;
-  f.height = view.h;
-  f.intrinsics = view.k;
-  f.grey = grey;
-  f.gbuffer_depth = view.depth;
-  f.gbuffer_normals = view.normals;
+  const light::SceneFrame f = view.Input(grey);
   light::ScenePipeline pipeline(o);
   const auto& r = pipeline.Process(f);
   ASSERT_TRUE(r.up.valid);

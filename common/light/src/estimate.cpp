@@ -162,6 +162,32 @@ size_t ThinByOrientation(float* rows, float* targets, float* rgb, float* weights
 
 }  // namespace
 
+namespace {
+
+// Weighted residual sums of a fit and its R^2 (clamped to [0, 1]; 0 without target variance).
+struct WeightedFit {
+  double sw = 0, swr2 = 0, r2 = 0;
+};
+
+WeightedFit WeightedFitOf(const std::vector<float>& weight, const std::vector<float>& residual,
+                          std::span<const float> targets, size_t m) {
+  WeightedFit f;
+  double swt = 0, swt2 = 0;
+  for (size_t i = 0; i < m; ++i) {
+    f.sw += weight[i];
+    f.swr2 += double(weight[i]) * residual[i] * residual[i];
+    swt += double(weight[i]) * targets[i];
+  }
+  const double mean_t = f.sw > 0 ? swt / f.sw : 0;
+  for (size_t i = 0; i < m; ++i) {
+    swt2 += double(weight[i]) * (targets[i] - mean_t) * (targets[i] - mean_t);
+  }
+  f.r2 = swt2 > 0 ? std::clamp(1.0 - f.swr2 / swt2, 0.0, 1.0) : 0.0;
+  return f;
+}
+
+}  // namespace
+
 LightEstimate SolveLight(std::span<const float> rows, std::span<const float> targets,
                          int coefficient_count, const EstimateOptions& options,
                          std::span<const float> row_weights) {
@@ -296,22 +322,13 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   // (1 - R^2) / R^2 of the current fit (a MAP weight sigma^2 / tau^2 with the signal's variance
   // as the unit), so clean data that pins the light down is left alone and texture, bounce light
   // and albedo ambiguity give way to the prior.
+  // Needs the current residuals.
   auto update_prior = [&]() {
-    residuals();
-    double sw = 0, swr2 = 0, swt = 0, swt2 = 0;
-    for (size_t i = 0; i < m; ++i) {
-      sw += weight[i];
-      swr2 += double(weight[i]) * residual[i] * residual[i];
-      swt += double(weight[i]) * targets[i];
-    }
-    const double mean_t = sw > 0 ? swt / sw : 0;
-    for (size_t i = 0; i < m; ++i) {
-      swt2 += double(weight[i]) * (targets[i] - mean_t) * (targets[i] - mean_t);
-    }
-    const double r2 = swt2 > 0 ? std::clamp(1.0 - swr2 / swt2, 0.0, 1.0) : 0.0;
+    const double r2 = WeightedFitOf(weight, residual, targets, m).r2;
     prior_scale = options.prior.weight * (1 - r2) / std::max(r2, 0.05);
   };
   if (!rho.empty()) {
+    residuals();
     update_prior();
     if (!solve()) return e;
   }
@@ -321,8 +338,8 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     rms_t = std::sqrt(rms_t / m);
     const int iterations = options.huber_iterations + options.tukey_iterations;
     for (int it = 0; it < iterations; ++it) {
-      if (!rho.empty()) update_prior();  // under the previous weights
       residuals();
+      if (!rho.empty()) update_prior();  // under the previous weights
       for (size_t i = 0; i < m; ++i) abs_r[i] = std::abs(residual[i]);
       // MAD scale from every k-th residual (at most ~4096 of them: the median's cost otherwise
       // dominates the estimate; the scale only sets the reweighting thresholds).
@@ -369,19 +386,9 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
     }
   }
   residuals();
-  double sw = 0, swr2 = 0, swt = 0, swt2 = 0;
-  for (size_t i = 0; i < m; ++i) {
-    sw += weight[i];
-    swr2 += double(weight[i]) * residual[i] * residual[i];
-    swt += double(weight[i]) * targets[i];
-  }
-  const double mean_t = sw > 0 ? swt / sw : 0;
-  for (size_t i = 0; i < m; ++i) {
-    swt2 += double(weight[i]) * (targets[i] - mean_t) * (targets[i] - mean_t);
-  }
-  e.rms_residual = sw > 0 ? std::sqrt(swr2 / sw) : 0;
-  const double r2 = swt2 > 0 ? std::clamp(1.0 - swr2 / swt2, 0.0, 1.0) : 0.0;
-  e.confidence = static_cast<float>(r2 * std::min(1.0, sw / (20.0 * cc)));
+  const WeightedFit fit = WeightedFitOf(weight, residual, targets, m);
+  e.rms_residual = fit.sw > 0 ? std::sqrt(fit.swr2 / fit.sw) : 0;
+  e.confidence = static_cast<float>(fit.r2 * std::min(1.0, fit.sw / (20.0 * cc)));
   e.coefficients = l;
   e.valid = true;
   const int dc = options.direction_bands * options.direction_bands;
