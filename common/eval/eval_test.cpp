@@ -123,6 +123,10 @@ TEST(RgbListTest, SortsAndConvertsStampsExactly) {
   EXPECT_EQ(e[1].timestamp, "1305031102.211214");
   EXPECT_EQ(ParseStampNs("12"), 12'000'000'000);
   EXPECT_FALSE(ParseStampNs("1.2.3"));
+  // Seconds whose nanosecond count does not fit in int64 are malformed, not an overflow.
+  EXPECT_EQ(ParseStampNs("9223372035.999999999"), 9'223'372'035'999'999'999);
+  EXPECT_FALSE(ParseStampNs("13000000000"));
+  EXPECT_FALSE(ParseStampNs("99999999999999999999999"));
   Write(dir, "rgb.txt", "1.0 rgb/a.png extra\n");
   EXPECT_EQ(ErrorOf([&] { LoadRgbList(path, "s/rgb.txt"); }),
             "s/rgb.txt:1: expected 'timestamp filename', got '1.0 rgb/a.png extra'");

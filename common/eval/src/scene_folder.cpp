@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include "probeless/parse/number.h"
@@ -202,9 +203,11 @@ std::optional<int64_t> ParseStampNs(const std::string& text) {
   size_t i = 0;
   int64_t seconds = 0;
   if (text.empty()) return std::nullopt;
+  // The largest whole second whose nanosecond count (plus a fraction) still fits in int64.
+  constexpr int64_t kMaxSeconds = std::numeric_limits<int64_t>::max() / 1'000'000'000LL - 1;
   while (i < text.size() && text[i] >= '0' && text[i] <= '9') {
-    if (seconds > 9'000'000'000LL) return std::nullopt;
     seconds = seconds * 10 + (text[i] - '0');
+    if (seconds > kMaxSeconds) return std::nullopt;
     ++i;
   }
   if (i == 0) return std::nullopt;
