@@ -7,11 +7,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "probeless/light/pipeline.h"
 #include "probeless/light/point_light.h"
 #include "probeless/sh/sh.h"
 #include "probeless/testing/testing.h"
@@ -375,6 +377,42 @@ TEST(Shadow, OneLineErrors) {
   EXPECT_EQ(
       probeless::testing::ErrorOf([&] { EstimateShadowDirection(nan_k, s.grey, ShadowOptions{}); }),
       "light::EstimateShadowDirection: non-finite intrinsics");
+}
+
+// With the light prior on, accepted cast shadows override it (ScenePipelineOptions::
+// shadows_override_prior): a low sun whose shading the corrupted normals leave ambiguous, so the
+// prior pulls the fit towards up, while the box's shadow pins the direction down.
+TEST(Shadow, AcceptedShadowsOverrideTheLightPrior) {
+  const V3 low = Unit({0.8, 0.6, -0.3});  // ~35 deg above the floor
+  Scene s;
+  s.Render(low, 1.5, 0.2);
+  s.CorruptNormals(50);
+  const V3 truth = s.ToCamera(low);
+  ScenePipelineOptions o;
+  ASSERT_GT(o.estimate.prior.weight, 0);
+  EXPECT_TRUE(o.shadows_override_prior);  // the default
+  o.light_model = LightModel::kDistant;
+  SceneFrame f;
+  f.width = s.width;
+  f.height = s.height;
+  f.intrinsics = s.k;
+  f.grey = s.grey;
+  f.gbuffer_depth = s.depth;
+  f.gbuffer_normals = s.normals;
+  ScenePipeline on(o);
+  const ScenePipelineResult& r_on = on.Process(f);
+  o.shadows_override_prior = false;
+  ScenePipeline off(o);
+  const ScenePipelineResult& r_off = off.Process(f);
+  ASSERT_TRUE(r_on.up.valid);
+  ASSERT_TRUE(r_on.shadow.valid);
+  const double e_on = AngleDeg(r_on.light.dominant_direction, truth);
+  const double e_off = AngleDeg(r_off.light.dominant_direction, truth);
+  const double e_fit = AngleDeg(r_on.distant.dominant_direction, truth);
+  std::printf("direction error: prior fit %.1f, refined from it %.1f, shadows override %.1f deg\n",
+              e_fit, e_off, e_on);
+  EXPECT_LT(e_on, 6.0);
+  EXPECT_LT(e_on, e_off);
 }
 
 }  // namespace

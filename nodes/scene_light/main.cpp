@@ -40,6 +40,8 @@
 //   shadows (true with subsample 1: the distant light's direction refined by cast shadows,
 //   light::RefineLightWithShadows; not with temporal_frames > 1), shadow_image_cues (true in depth
 //   mode: ShadowOptions::image_cues, light::RawDepthShadowOptions), shadow_stride (8),
+//   shadows_override_prior (true: an accepted shadow direction overrides the light prior,
+//   light::ScenePipelineOptions::shadows_override_prior),
 //   shadow_depth (raw; gbuffer mode: the search on the frame's depth image with the image cues,
 //   or on G_r without them: "gbuffer"),
 //   use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes with
@@ -143,6 +145,7 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.shadow.image_cues = mode == "gbuffer" && image_cues;
   po.depth_image_cues = mode == "gbuffer" || image_cues;
   po.shadow.stride = node.Param("shadow_stride", 8);
+  po.shadows_override_prior = node.Param("shadows_override_prior", true);
   po.shadow.threads = to.threads;
   if (po.shadow.stride < 1) {
     throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +

@@ -55,7 +55,9 @@
 // --filter-angle, --filter-view, --filter-jump), --temporal N / --forgetting F
 // (light::TemporalLightEstimator fed with the N - 1 frames before each evaluated one, camera
 // rotation from the simulator), --smooth-radius / --normal-step (normals of the sensor depth),
-// --no-balance. --prior-weight W: the light prior's weight (0 = off; default the node's).
+// --no-balance. --prior-weight W: the light prior's weight (0 = off; default the node's);
+// --no-shadows-override-prior: ScenePipelineOptions::shadows_override_prior false (the shadow
+// search refines the prior's fit).
 // --light-model distant|point|auto (light::EstimateSceneLight; default auto;
 // --temporal implies distant):
 // the near-field point-lamp fit (docs/light.md, "Near-field lamps"), --lamps K (1 or 2),
@@ -177,6 +179,7 @@ struct Options {
   float forgetting = 0.5f;   // --forgetting F
   bool no_balance = false;   // --no-balance: no normal-orientation balancing (ablation)
   double prior_weight = -1;  // --prior-weight W: LightPrior::weight (-1 = the node's default)
+  bool shadows_override_prior = true;  // --no-shadows-override-prior: false
   bool mix = false;  // --mix: hybrids of clean and sensor inputs (which sensor effect costs what)
   light::LightModel light_model = light::LightModel::kAuto;  // --light-model
   bool light_model_set = false;                              // --light-model given
@@ -751,7 +754,9 @@ int Run(int argc, char** argv) {
     else if (a == "--prior-weight") {
       o.prior_weight = node::ParseNumberOption(a, value());
       if (!(o.prior_weight >= 0)) throw node::UsageError("--prior-weight must be >= 0");
-    } else if (a == "--mix")
+    } else if (a == "--no-shadows-override-prior")
+      o.shadows_override_prior = false;
+    else if (a == "--mix")
       o.mix = true;
     else if (a == "--light-model") {
       const std::string v = value();
@@ -918,6 +923,7 @@ int Run(int argc, char** argv) {
   if (o.warm_lm > 0) base.point.warm_lm_iterations = o.warm_lm;
   if (!o.point_screen) base.point.screen_rows = 0;
   base.point_warm_start = o.point_warm;
+  base.shadows_override_prior = o.shadows_override_prior;
   base.shadow = o.shadow;
   base.shadow.threads = o.threads;
   // --shadow-cues: `all` also on G-buffers (the clean render, fused G_r), `none` not even on depth.

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <limits>
+#include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -270,9 +273,29 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   // The light.
   const auto t_estimate = Clock::now();
   const double cpu_estimate = ThreadCpuMs();
+  // The fit without the prior (computed once, when a distant light with the prior needs it):
+  // the shadow search's seed (shadows_override_prior) and the evidence's prior_shift_deg.
+  const bool prior_on = estimate.prior.weight > 0 && estimate.prior.up != Vec3f{};
+  std::optional<LightEstimate> free_fit;
+  auto free = [&]() -> const LightEstimate& {
+    if (!free_fit) {
+      EstimateOptions free_options = estimate;
+      free_options.prior.weight = 0;
+      free_fit = EstimateLight(s.transfer, f.grey, free_options, f.colour, weights);
+    }
+    return *free_fit;
+  };
   auto shadow_search = [&](LightEstimate* light) {
     const double cpu0 = ProcessCpuMs();
-    r.shadow = RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, light);
+    if (o.shadows_override_prior && prior_on && free().valid) {
+      LightEstimate seed = free();
+      r.shadow =
+          RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, &seed);
+      if (r.shadow.valid) *light = std::move(seed);
+    } else {
+      r.shadow =
+          RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, light);
+    }
     r.timings.cpu_ms_shadow = ProcessCpuMs() - cpu0;
     r.shadow_ran = r.shadow.evaluations > 0;
   };
@@ -307,6 +330,17 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     r.light = std::move(scene.light);
     r.timings.cpu_ms_point = scene.point_thread_cpu_ms;
     if (shadows && r.used == LightModel::kDistant && r.light.valid) shadow_search(&r.light);
+  }
+  // The evidence behind the light (its confidence's inputs).
+  r.evidence = {};
+  r.evidence.fit_confidence = r.light.confidence;
+  r.evidence.shadow_accepted = r.shadow_ran && r.shadow.valid;
+  if (prior_on && r.light.valid && r.used == LightModel::kDistant && !temporal && free().valid) {
+    const Vec3f& a = r.distant.dominant_direction;
+    const Vec3f& b = free().dominant_direction;
+    const float dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    r.evidence.prior_shift_deg =
+        std::acos(std::clamp(dot, -1.0f, 1.0f)) * 180.0f / std::numbers::pi_v<float>;
   }
   r.timings.cpu_ms_estimate = ThreadCpuMs() - cpu_estimate;
   r.timings.ms_estimate = MsSince(t_estimate);

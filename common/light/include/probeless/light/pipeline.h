@@ -93,6 +93,12 @@ struct ScenePipelineOptions {
   ShadowOptions shadow;
   bool depth_image_cues = true;
   ShadowGeometry shadow_geometry = ShadowGeometry::kDepthImage;
+  // With the light prior on (estimate.prior.weight > 0) and the distant model used: the shadow
+  // search is seeded with the direction of the fit without the prior, and an accepted shadow
+  // direction replaces the prior's light by that prior-free fit rotated to it (cast shadows are
+  // direct evidence of the light, which the prior stands in for when the shading alone cannot pin
+  // it down). false: the search refines the prior's fit.
+  bool shadows_override_prior = true;
 
   // The light prior's up direction (estimate.prior, used when its weight > 0): estimated per frame
   // from the fit's geometry (EstimateUpDirection); a frame without a horizontal surface in view
@@ -148,6 +154,17 @@ struct ScenePipelineTimings {
   double cpu_ms_shadow = NAN;  // process CPU of the shadow search (NAN: it did not run)
 };
 
+// What supports a frame's light: the inputs of its confidence (ScenePipelineOptions::
+// confidence_calibration).
+struct SceneEvidence {
+  float fit_confidence = 0;  // the published model's fit: LightEstimate::confidence (R^2 x rows)
+  bool shadow_accepted = false;  // cast shadows set the direction (RefineLightWithShadows valid)
+  // Angle between the dominant directions of the distant fit with and without the light prior
+  // (degrees, [0, 180]): how far the prior had to move the data's answer; 0 without the prior
+  // (off, no up direction, the point model, the temporal fit).
+  float prior_shift_deg = 0;
+};
+
 // One frame's output. The views, spans and the transfer borrow buffers of the pipeline (or of the
 // frame's input): valid until the next Process, and only as long as the input's buffers.
 struct ScenePipelineResult {
@@ -181,6 +198,7 @@ struct ScenePipelineResult {
   std::array<float, 3> colour{1, 1, 1};
   // The up direction of the light prior (valid false: no prior this frame or none asked for).
   UpDirection up;
+  SceneEvidence evidence;
   ScenePipelineTimings timings;
 };
 
