@@ -1,16 +1,21 @@
 // raytrace_bench: speed of the ray tracer and the simulator.
 //
 //   raytrace_bench [--scenario FILE.yaml] [--frames N] [--threads N] [--json OUT]
-//                  [--pt-spp N] [--pt-image OUT.ppm] [--no-pt]
+//                  [--pt-spp N] [--pt-image OUT.ppm] [--no-pt] [--pt-only]
+//                  [--pt-size WxH] [--pt-seed S] [--pt-rr N] [--pt-raw OUT.pfm] [--pt-ref REF.pfm]
 //
 // Rows: (1) whole simulator frames (render + sensor effects + ground truth) of the scenario,
 // default data/scenarios/room_dynamic.yaml at its 640x480 with shadows; (2) the renderer alone on
 // the same frames; (3) batched closest-hit and (4) occlusion queries of random rays through the
 // scene (the PRT-bake API); (5) one path-traced 640x480 frame of the furnished room of
 // pathtrace_room.h (64 paths per pixel, 3 bounces, sun + sky + 2 lamps). Prints a table; --json
-// writes the same figures.
+// writes the same figures. Noise of the path trace: --pt-raw writes its linear RGB (PFM), --pt-ref
+// prints its rms error per pixel and channel against a reference PFM (a high-spp render), divided
+// by the reference's mean; --pt-size renders the room smaller (the same view), --pt-only skips rows
+// 1-4.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
@@ -61,6 +66,38 @@ void WritePpm(const std::string& path, const raytrace::Frame& f) {
   if (!out) throw std::runtime_error("cannot write '" + path + "'");
 }
 
+// Writes linear RGB as a little-endian PFM (bottom row first).
+void WritePfm(const std::string& path, const raytrace::Frame& f) {
+  std::ofstream out(path, std::ios::binary);
+  out << "PF\n" << f.width << " " << f.height << "\n-1.0\n";
+  for (int y = f.height - 1; y >= 0; --y) {
+    out.write(reinterpret_cast<const char*>(&f.linear_rgb[3 * static_cast<size_t>(y) * f.width]),
+              static_cast<std::streamsize>(3 * sizeof(float) * f.width));
+  }
+  if (!out) throw std::runtime_error("cannot write '" + path + "'");
+}
+
+// Reads a PFM written by WritePfm into top-row-first linear RGB of width x height.
+std::vector<float> ReadPfm(const std::string& path, int width, int height) {
+  std::ifstream in(path, std::ios::binary);
+  std::string magic;
+  int w = 0, h = 0;
+  double scale = 0;
+  in >> magic >> w >> h >> scale;
+  in.get();
+  if (!in || magic != "PF" || w != width || h != height || scale >= 0) {
+    throw std::runtime_error("'" + path + "': not a little-endian RGB PFM of " +
+                             std::to_string(width) + "x" + std::to_string(height));
+  }
+  std::vector<float> rgb(3 * static_cast<size_t>(w) * h);
+  for (int y = h - 1; y >= 0; --y) {
+    in.read(reinterpret_cast<char*>(&rgb[3 * static_cast<size_t>(y) * w]),
+            static_cast<std::streamsize>(3 * sizeof(float) * w));
+  }
+  if (!in) throw std::runtime_error("'" + path + "': truncated");
+  return rgb;
+}
+
 int Run(int argc, char** argv) {
   std::string scenario_path =
       std::string(PROBELESS_SOURCE_DIR) + "/data/scenarios/room_dynamic.yaml";
@@ -68,8 +105,12 @@ int Run(int argc, char** argv) {
   int threads = 2;
   int pt_spp = 64;
   bool pathtrace = true;
+  bool pt_only = false;
+  int pt_width = 0, pt_height = 0;  // 0: the room camera's 640x480
+  int pt_rr = -1;                   // -1: the PathTraceOptions default
+  uint64_t pt_seed = 1;
   std::string json;
-  std::string pt_image;
+  std::string pt_image, pt_raw, pt_ref;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -79,7 +120,9 @@ int Run(int argc, char** argv) {
     if (a == "-h" || a == "--help") {
       std::printf(
           "usage: raytrace_bench [--scenario FILE] [--frames N] [--threads N] [--json OUT]\n"
-          "                      [--pt-spp N] [--pt-image OUT.png] [--no-pt]\n");
+          "                      [--pt-spp N] [--pt-image OUT.ppm] [--no-pt] [--pt-only]\n"
+          "                      [--pt-size WxH] [--pt-seed S] [--pt-rr N] [--pt-raw OUT.pfm]\n"
+          "                      [--pt-ref REF.pfm]\n");
       return 0;
     } else if (a == "--scenario") {
       scenario_path = value();
@@ -95,23 +138,42 @@ int Run(int argc, char** argv) {
       pt_image = value();
     } else if (a == "--no-pt") {
       pathtrace = false;
+    } else if (a == "--pt-only") {
+      pt_only = true;
+    } else if (a == "--pt-size") {
+      const std::string v = value();
+      const size_t x = v.find('x');
+      if (x == std::string::npos) throw std::invalid_argument("--pt-size expects WxH, got " + v);
+      pt_width = parse::ParseInteger<int>(a, v.substr(0, x), 1);
+      pt_height = parse::ParseInteger<int>(a, v.substr(x + 1), 1);
+    } else if (a == "--pt-seed") {
+      pt_seed = parse::ParseInteger<uint64_t>(a, value(), 0);
+    } else if (a == "--pt-rr") {
+      pt_rr = parse::ParseInteger<int>(a, value(), 0);
+    } else if (a == "--pt-raw") {
+      pt_raw = value();
+    } else if (a == "--pt-ref") {
+      pt_ref = value();
     } else {
       throw std::invalid_argument("unknown option '" + a +
-                                  "' (expected --scenario, --frames, "
-                                  "--threads, --json, --pt-spp, --pt-image, --no-pt)");
+                                  "' (expected --scenario, --frames, --threads, --json, --pt-spp, "
+                                  "--pt-image, --no-pt, --pt-only, --pt-size, --pt-seed, --pt-rr, "
+                                  "--pt-raw, --pt-ref)");
     }
   }
   if (frames < 1 || threads < 1 || pt_spp < 1) {
     throw std::invalid_argument("--frames, --threads and --pt-spp must be >= 1");
   }
+  if (pt_only && !pathtrace)
+    throw std::invalid_argument("--pt-only and --no-pt exclude each other");
   sim::Scenario scenario = sim::LoadScenario(scenario_path);
   const uint64_t n = std::min<uint64_t>(frames, scenario.frames);
   sim::Simulator simulator(scenario, threads);
   std::vector<Row> rows;
 
   // (1) Whole simulator frames, spread over the scenario.
-  simulator.Render(0);  // warm-up: first BVH build, LUTs
-  {
+  if (!pt_only) simulator.Render(0);  // warm-up: first BVH build, LUTs
+  if (!pt_only) {
     Row r{"simulator frame (render + sensor + ground truth)"};
     const auto t0 = Clock::now();
     for (uint64_t k = 0; k < n; ++k) {
@@ -124,11 +186,11 @@ int Run(int argc, char** argv) {
     rows.push_back(r);
   }
   // (2) The renderer alone on the last frame's scene state.
-  const sim::SimFrame last = simulator.Render(scenario.frames / 2);
+  const sim::SimFrame last = pt_only ? sim::SimFrame{} : simulator.Render(scenario.frames / 2);
   raytrace::RenderOptions options;
   options.shadows = scenario.render.shadows;
   raytrace::ThreadPool pool(threads);
-  {
+  if (!pt_only) {
     Row r{"render only (primary + shadow rays, shading)"};
     const auto t0 = Clock::now();
     for (uint64_t k = 0; k < n; ++k) {
@@ -152,7 +214,7 @@ int Run(int argc, char** argv) {
     ray.direction = raytrace::Normalize({uniform(), uniform(), uniform()});
     ray.t_far = 100;
   }
-  {
+  if (!pt_only) {
     Row r{"closest hit, 1M random rays (Scene::Intersect)"};
     std::vector<raytrace::Hit> hits(rays.size());
     const auto t0 = Clock::now();
@@ -161,7 +223,7 @@ int Run(int argc, char** argv) {
     r.rays = static_cast<double>(rays.size());
     rows.push_back(r);
   }
-  {
+  if (!pt_only) {
     Row r{"occlusion, 1M random rays (Scene::Occluded)"};
     std::vector<uint8_t> visible(rays.size());
     const auto t0 = Clock::now();
@@ -173,15 +235,29 @@ int Run(int argc, char** argv) {
 
   // (5) One path-traced frame of the furnished room.
   raytrace::Scene room;
-  const raytrace::Camera room_camera = raytrace_bench::BuildPathTraceRoom(room);
+  raytrace::Camera room_camera = raytrace_bench::BuildPathTraceRoom(room);
+  if (pt_width > 0) {  // the same view, smaller: the focal length and centre scale with the width
+    const double s = static_cast<double>(pt_width) / room_camera.width;
+    room_camera.fx *= s;
+    room_camera.fy *= s;
+    room_camera.cx = (room_camera.cx + 0.5) * s - 0.5;
+    room_camera.cy = (room_camera.cy + 0.5) * s - 0.5;
+    room_camera.width = pt_width;
+    room_camera.height = pt_height;
+  }
   raytrace::PathTraceOptions pt;
   pt.samples_per_pixel = pt_spp;
   pt.max_bounces = 3;
+  pt.seed = pt_seed;
+  if (pt_rr >= 0) pt.russian_roulette_after = pt_rr;
+  double pt_rms = -1;
   if (pathtrace) {
     raytrace::Camera tiny = room_camera;  // warm-up: the GGX albedo tables are built on first use
     tiny.width = tiny.height = 1;
     raytrace::PathTrace(room, tiny, pt, &pool);
-    Row r{"path trace 640x480, " + std::to_string(pt_spp) + " spp, 3 bounces (room)"};
+    Row r{"path trace " + std::to_string(room_camera.width) + "x" +
+          std::to_string(room_camera.height) + ", " + std::to_string(pt_spp) +
+          " spp, 3 bounces (room)"};
     const double cpu0 = CpuSeconds();
     const auto t0 = Clock::now();
     const raytrace::Frame f = raytrace::PathTrace(room, room_camera, pt, &pool);
@@ -191,6 +267,18 @@ int Run(int argc, char** argv) {
     r.rays = static_cast<double>(f.rays);
     rows.push_back(r);
     if (!pt_image.empty()) WritePpm(pt_image, f);
+    if (!pt_raw.empty()) WritePfm(pt_raw, f);
+    if (!pt_ref.empty()) {
+      const std::vector<float> ref = ReadPfm(pt_ref, f.width, f.height);
+      double sum2 = 0, mean = 0;
+      for (size_t i = 0; i < ref.size(); ++i) {
+        const double d = static_cast<double>(f.linear_rgb[i]) - ref[i];
+        sum2 += d * d;
+        mean += ref[i];
+      }
+      mean /= static_cast<double>(ref.size());
+      pt_rms = std::sqrt(sum2 / static_cast<double>(ref.size())) / mean;
+    }
   }
 
   std::printf("raytrace_bench: %s, %dx%d, shadows %s, %zu triangles, %d threads (%u cores)\n",
@@ -203,6 +291,11 @@ int Run(int argc, char** argv) {
   }
   const double load = LoadAverage();
   std::printf("1-min load average at the end: %.2f\n", load);
+  if (pt_rms >= 0) {
+    std::printf("path trace rms error / reference mean: %.4f (seed %llu, %d spp, %dx%d)\n", pt_rms,
+                static_cast<unsigned long long>(pt_seed), pt_spp, room_camera.width,
+                room_camera.height);
+  }
   std::printf("%-50s %10s %10s %14s %10s\n", "row", "fps", "ms/frame", "Mrays/s", "cpu s");
   for (const Row& r : rows) {
     const double fps = r.frames > 0 ? r.frames / r.seconds : 0;
