@@ -58,8 +58,11 @@ std::string ErrorOf(const std::function<void()>& fn) {
   return "(no error)";
 }
 
-// A closed box of albedo a whose walls emit L_e, seen from inside: L = L_e / (1 - a).
-TEST(PathTrace, WhiteFurnaceConvergesToGeometricSeries) {
+// A closed box of albedo a whose walls emit L_e, seen from inside: L = L_e / (1 - a), with Russian
+// roulette from the first vertex (the default) and from the third.
+class WhiteFurnace : public ::testing::TestWithParam<int> {};
+
+TEST_P(WhiteFurnace, ConvergesToGeometricSeries) {
   Scene scene;
   Material wall = Diffuse({0.6f, 0.6f, 0.6f});
   wall.emission = {0.2f, 0.2f, 0.2f};
@@ -68,7 +71,7 @@ TEST(PathTrace, WhiteFurnaceConvergesToGeometricSeries) {
   PathTraceOptions options;
   options.samples_per_pixel = 16;
   options.max_bounces = 1000;
-  options.russian_roulette_after = 2;
+  options.russian_roulette_after = GetParam();
   ThreadPool pool(2);
   const Frame f = PathTrace(scene, TestCamera(40, 30), options, &pool);
   std::vector<double> pixels;
@@ -82,6 +85,10 @@ TEST(PathTrace, WhiteFurnaceConvergesToGeometricSeries) {
   EXPECT_NEAR(s.mean, expected, 4 * s.error) << "standard error " << s.error;
   EXPECT_LT(s.error, 0.01 * expected);
 }
+
+INSTANTIATE_TEST_SUITE_P(PathTrace, WhiteFurnace, ::testing::Values(0, 2), [](const auto& info) {
+  return "RouletteAfter" + std::to_string(info.param);
+});
 
 // A huge plane under a uniform environment of radiance 1, direct light only: each pixel reads the
 // BSDF's directional albedo at its viewing angle.

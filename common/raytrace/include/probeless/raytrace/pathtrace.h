@@ -19,7 +19,7 @@ struct PathTraceOptions {
   // Bounces after the first hit (>= 0): 0 = direct light only (lights by next-event estimation,
   // environment, area lights and emitters by the one BSDF ray after the first hit).
   int max_bounces = 3;
-  int russian_roulette_after = 1;  // bounces before Russian roulette starts (>= 0)
+  int russian_roulette_after = 0;  // bounces before Russian roulette starts (>= 0)
   float exposure = 1;              // multiplies the radiance into Frame::linear_rgb and srgb (>= 0)
   uint64_t seed = 1;               // with frame_index, the only source of the random numbers
   uint64_t frame_index = 0;        // decorrelates the noise between frames
