@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "probeless/light/estimate.h"
+#include "probeless/light/fusion.h"
 #include "probeless/light/pipeline.h"
 #include "probeless/light/up_direction.h"
 #include "probeless/sh/sh.h"
@@ -241,6 +242,62 @@ TEST(ScenePipeline, PriorIsOnByDefaultAboutTheEstimatedUp) {
   EXPECT_EQ(r.light.coefficients, e.coefficients);
   eo.prior.weight = 0;
   EXPECT_NE(light::EstimateLight(t, grey, eo).coefficients, e.coefficients);
+}
+
+TEST(ScenePipeline, ConfidenceIsTheCalibratedExpectedError) {
+  // The default table: raw ascending, expected error non-increasing, so the published confidence
+  // is in [0, 1] and monotone in the fit's.
+  const std::vector<double> knots = light::DefaultSceneConfidenceKnots();
+  ASSERT_GE(knots.size(), 4u);
+  ASSERT_EQ(knots.size() % 2, 0u);
+  for (size_t k = 2; k < knots.size(); k += 2) {
+    EXPECT_GT(knots[k], knots[k - 2]);
+    EXPECT_LE(knots[k + 1], knots[k - 1]);
+  }
+  const light::ConfidenceCalibration table(knots);
+  double previous = -1;
+  for (int i = 0; i <= 100; ++i) {
+    const double c = table.Apply(i / 100.0);
+    EXPECT_GE(c, 0);
+    EXPECT_LE(c, 1);
+    EXPECT_GE(c, previous) << i;
+    previous = c;
+  }
+  // The first knot's error below it, the last's above it.
+  EXPECT_NEAR(light::ExpectedErrorFromConfidence(table.Apply(0)), knots[1], 1e-9);
+  EXPECT_NEAR(light::ExpectedErrorFromConfidence(table.Apply(1)), knots.back(), 1e-9);
+
+  // The pipeline publishes the table's confidence of its fit's; empty knots publish the fit's.
+  const TiltedView view(30, 5);
+  const size_t n = static_cast<size_t>(view.w) * view.h;
+  const std::array<double, 3> l{0, -0.8, -0.6};
+  std::vector<float> grey(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const float* nn = &view.normals[3 * i];
+    grey[i] =
+        static_cast<float>(0.5 * (0.2 + std::max(0.0, nn[0] * l[0] + nn[1] * l[1] + nn[2] * l[2])));
+  }
+  light::ScenePipelineOptions o;
+  o.transfer.directions = 16;
+  o.light_model = light::LightModel::kDistant;
+  o.shadow.enabled = false;
+  const light::SceneFrame f = view.Input(grey);
+  light::ScenePipeline calibrated(o);
+  const light::ScenePipelineResult& r = calibrated.Process(f);
+  ASSERT_TRUE(r.light.valid);
+  EXPECT_GT(r.evidence.fit_confidence, 0);
+  EXPECT_FLOAT_EQ(r.light.confidence, static_cast<float>(table.Apply(r.evidence.fit_confidence)));
+  EXPECT_GE(r.evidence.prior_shift_deg, 0);
+  EXPECT_LE(r.evidence.prior_shift_deg, 180);
+  o.confidence_knots.clear();
+  light::ScenePipeline raw(o);
+  const light::ScenePipelineResult& q = raw.Process(f);
+  EXPECT_EQ(q.light.confidence, q.evidence.fit_confidence);
+
+  o.confidence_knots = {0.5, 20, 0.2, 30};
+  EXPECT_EQ(ErrorOf([&] { light::ScenePipeline bad(o); }),
+            "light::ScenePipeline: confidence_knots: confidence calibration: knot 1 needs a raw "
+            "confidence in [0, 1] above the previous one and an error > 0");
 }
 
 }  // namespace

@@ -41,16 +41,17 @@
 //   light::RefineLightWithShadows; not with temporal_frames > 1), shadow_image_cues (true in depth
 //   mode: ShadowOptions::image_cues, light::RawDepthShadowOptions), shadow_stride (8),
 //   shadows_override_prior (true: an accepted shadow direction overrides the light prior,
-//   light::ScenePipelineOptions::shadows_override_prior),
-//   shadow_depth (raw; gbuffer mode: the search on the frame's depth image with the image cues,
-//   or on G_r without them: "gbuffer"),
-//   use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes with
-//   publish_aux on `scene/aux` (msgs::AuxiliaryViews) take part in the transfer's occlusion test;
-//   the views with the G_r's stamp are used, waiting at most aux_wait_ms (50) for them; without a
-//   match the frame runs without views (one warning, counted at exit), and a malformed message is
-//   one error line and the frame runs without views).
-//   The lamp positions are not in msgs::ShLight: they go to the debug log. The point fit starts
-//   from the previous frame's lamp while the point model is in use (light::PointLightTracker).
+//   light::ScenePipelineOptions::shadows_override_prior), confidence_calibration (knots: fit
+//   confidence, expected error in degrees; default light::DefaultSceneConfidenceKnots),
+//   raw_confidence (false: publish the fit confidence uncalibrated), shadow_depth (raw; gbuffer
+//   mode: the search on the frame's depth image with the image cues, or on G_r without them:
+//   "gbuffer"), use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes
+//   with publish_aux on `scene/aux` (msgs::AuxiliaryViews) take part in the transfer's occlusion
+//   test; the views with the G_r's stamp are used, waiting at most aux_wait_ms (50) for them;
+//   without a match the frame runs without views (one warning, counted at exit), and a malformed
+//   message is one error line and the frame runs without views). The lamp positions are not in
+//   msgs::ShLight: they go to the debug log. The point fit starts from the previous frame's lamp
+//   while the point model is in use (light::PointLightTracker).
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
 // otherwise.
 #include "probeless/node/main.h"
@@ -146,6 +147,10 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.depth_image_cues = mode == "gbuffer" || image_cues;
   po.shadow.stride = node.Param("shadow_stride", 8);
   po.shadows_override_prior = node.Param("shadows_override_prior", true);
+  // The published confidence on the ShLight scale (light::ScenePipelineOptions::confidence_knots);
+  // raw_confidence publishes the fit's own (the input of tools/light_prior/fit_confidence.py).
+  po.confidence_knots = node.Param("confidence_calibration", po.confidence_knots);
+  if (node.Param("raw_confidence", false)) po.confidence_knots.clear();
   po.shadow.threads = to.threads;
   if (po.shadow.stride < 1) {
     throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +

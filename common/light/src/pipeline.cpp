@@ -11,6 +11,8 @@
 #include <string>
 #include <vector>
 
+#include "probeless/light/fusion.h"
+
 namespace probeless::light {
 
 namespace {
@@ -35,6 +37,11 @@ double MsSince(Clock::time_point t0) {
 
 void Validate(const ScenePipelineOptions& o) {
   const std::string what = "light::ScenePipeline: ";
+  try {
+    ConfidenceCalibration calibration(o.confidence_knots);
+  } catch (const FusionError& e) {
+    throw LightError(what + "confidence_knots: " + e.what());
+  }
   if (o.light_model != LightModel::kDistant && o.temporal.frames > 1) {
     // The temporal accumulator is a distant-light fit.
     throw LightError(what + "temporal.frames > 1 needs light_model distant, got " +
@@ -74,9 +81,14 @@ void Validate(const ScenePipelineOptions& o) {
 
 }  // namespace
 
+std::vector<double> DefaultSceneConfidenceKnots() {
+  // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md).
+  return {0.002, 61.8, 0.104, 61.7, 0.258, 35.2, 0.369, 27.8};
+}
+
 struct ScenePipeline::State {
   explicit State(const ScenePipelineOptions& o)
-      : options(o), computer(o.transfer), temporal(o.temporal) {
+      : options(o), computer(o.transfer), temporal(o.temporal), confidence(o.confidence_knots) {
     scene.model = o.light_model;
     scene.distant = o.estimate;
     scene.point = o.point;
@@ -93,6 +105,7 @@ struct ScenePipeline::State {
   SceneLightOptions scene;
   TransferComputer computer;
   TemporalLightEstimator temporal;
+  ConfidenceCalibration confidence;
   PointLightTracker tracker;
   // Carried between frames: the last light's dominant part (eq. 10's L_D, E_D), the last pose.
   std::optional<DominantLight> previous_light;
@@ -341,6 +354,9 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     const float dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     r.evidence.prior_shift_deg =
         std::acos(std::clamp(dot, -1.0f, 1.0f)) * 180.0f / std::numbers::pi_v<float>;
+  }
+  if (r.light.valid) {
+    r.light.confidence = static_cast<float>(s.confidence.Apply(r.light.confidence));
   }
   r.timings.cpu_ms_estimate = ThreadCpuMs() - cpu_estimate;
   r.timings.ms_estimate = MsSince(t_estimate);

@@ -31,9 +31,10 @@ double ConfidenceFromExpectedError(double error_deg);
 double ExpectedErrorFromConfidence(double confidence);
 
 // A producer's raw confidence mapped onto the scale above: knots (raw confidence, expected error
-// in degrees), raw ascending in [0, 1], errors > 0; piecewise linear between knots, constant
-// beyond the ends. For producers not yet calibrated (scene_light's R^2 x row saturation: to be
-// fitted on the evaluation world's validation split, docs/light.md "Fusion").
+// in degrees), raw ascending in [0, 1], errors > 0; piecewise linear in the error between knots,
+// constant beyond the ends. scene_light applies its own (ScenePipelineOptions::confidence_knots);
+// light_fusion has one per input for producers that publish a raw confidence (docs/light.md
+// "Confidence").
 class ConfidenceCalibration {
  public:
   // Empty knots = identity (the producer already publishes on the scale). Throws FusionError

@@ -15,6 +15,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <vector>
 
 #include "probeless/light/estimate.h"
 #include "probeless/light/point_light.h"
@@ -45,6 +46,10 @@ enum class ShadowGeometry {
   kDepthImage,
   kGeometryBuffer,  // always the G-buffer
 };
+
+// The default ScenePipelineOptions::confidence_knots (pairs: fit confidence ascending, expected
+// error in degrees).
+std::vector<double> DefaultSceneConfidenceKnots();
 
 // Every option of the node and the evaluation; the defaults are the node's (docs/nodes.md,
 // scene_light) for subsample 1.
@@ -108,6 +113,14 @@ struct ScenePipelineOptions {
   // mean linear colour of the fit's pixels is the illuminant's): ScenePipelineResult::colour.
   // false: white.
   bool grey_world_colour = true;
+
+  // The published confidence on msgs::ShLight's scale (light/fusion.h: c = 1 / (1 + (e / 10
+  // deg)^2), e the expected dominant-direction error): knots (fit confidence, median direction
+  // error in degrees) of ConfidenceCalibration, applied to the published model's fit confidence
+  // (SceneEvidence::fit_confidence). The default is the reliability table of the evaluation world's
+  // train and validation splits (tools/light_prior/fit_confidence.py, docs/light.md "Confidence");
+  // empty = publish the fit confidence itself.
+  std::vector<double> confidence_knots = DefaultSceneConfidenceKnots();
 
   // The one-bounce indirect buffer (eq. 10-12) from the previous frame's dominant light: in the
   // result's transfer from the second frame on (none after a frame without a light).
