@@ -83,7 +83,7 @@ void Validate(const ScenePipelineOptions& o) {
 
 std::vector<double> DefaultSceneConfidenceKnots() {
   // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md).
-  return {0.002, 61.8, 0.104, 61.7, 0.258, 35.2, 0.369, 27.8};
+  return {0.002, 61.8, 0.146, 44.3, 0.279, 35.2, 0.490, 30.7};
 }
 
 struct ScenePipeline::State {
