@@ -1,5 +1,6 @@
 // The private SIMD kernels against their scalar references on random inputs (fixed seeds): the
-// transfer's occlusion test (8 directions per step) and the shadow search's ray (8 points).
+// transfer's occlusion test (8 directions per step) and the shadow search's ray (8 points); and
+// the run-time choice between them (probeless/simd/simd.h).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -7,16 +8,26 @@
 #include <vector>
 
 #include "occlusion_kernel.h"
+#include "probeless/simd/simd.h"
 #include "shadow_kernel.h"
 
 namespace probeless::light::internal {
 namespace {
 
-TEST(OcclusionKernel, SimdMatchesScalar) {
-  if (!OcclusionSimdAvailable()) {
-    GTEST_SKIP() << "probeless_light built without AVX2 (PROBELESS_LIGHT_AVX2=OFF): OcclusionSimd "
-                    "is OcclusionScalar";
+TEST(SimdDispatch, KernelsFollowTheActiveLevel) {
+  {
+    simd::ScopedLevel portable(simd::Level::kPortable);
+    EXPECT_EQ(OcclusionKernel(), &OcclusionScalar);
+    EXPECT_EQ(ShadowRay8Kernel(), &ShadowRay8Scalar);
   }
+  if (simd::Supported() != simd::Level::kAvx2Fma) GTEST_SKIP() << "no AVX2/FMA on this CPU";
+  simd::ScopedLevel avx2(simd::Level::kAvx2Fma);
+  EXPECT_EQ(OcclusionKernel(), &OcclusionAvx2);
+  EXPECT_EQ(ShadowRay8Kernel(), &ShadowRay8Avx2);
+}
+
+TEST(OcclusionKernel, SimdMatchesScalar) {
+  if (simd::Supported() != simd::Level::kAvx2Fma) GTEST_SKIP() << "no AVX2/FMA on this CPU";
   constexpr int kW = 96, kH = 72;
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
@@ -55,7 +66,7 @@ TEST(OcclusionKernel, SimdMatchesScalar) {
       for (float& c : n) c /= len;
       PixelOcclusion a, b;
       OcclusionScalar(p, off.data(), x, n, &a);
-      OcclusionSimd(p, off.data(), x, n, &b);
+      OcclusionAvx2(p, off.data(), x, n, &b);
       for (int j = 0; j < n_dir; ++j) {
         ASSERT_NEAR(a.cosn[j], b.cosn[j], 1e-6f) << "pixel " << i << " direction " << j;
         // A sample within rounding of a threshold (image border, depth bias, range) may go
@@ -74,6 +85,7 @@ TEST(OcclusionKernel, SimdMatchesScalar) {
 // The shadow ray: a bumpy depth image with holes and a box standing in front of it, random points
 // on the surface and random directions; every outcome (lit, occluded, unknown) must occur.
 TEST(ShadowRayKernel, EightPointsMatchTheScalarRay) {
+  if (simd::Supported() != simd::Level::kAvx2Fma) GTEST_SKIP() << "no AVX2/FMA on this CPU";
   constexpr int kW = 120, kH = 90;
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
@@ -112,7 +124,7 @@ TEST(ShadowRayKernel, EightPointsMatchTheScalarRay) {
         x[k] = (u - r.cx) * z[k] / r.fx, y[k] = (v - r.cy) * z[k] / r.fy;
       }
       if (trial % 10 == 0) z[7] = 0;  // padding lanes: lit
-      ShadowRay8(r, x, y, z, l, out);
+      ShadowRay8Avx2(r, x, y, z, l, out);
       for (int k = 0; k < 8; ++k) {
         const float ref = z[k] > 0 ? ShadowRayScalar(r, x[k], y[k], z[k], l) : 1.0f;
         ++compared;

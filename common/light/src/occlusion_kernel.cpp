@@ -3,9 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
-#if defined(__AVX2__) && defined(__FMA__)
+#include "probeless/simd/simd.h"
+
+#ifdef PROBELESS_SIMD_X86
 #include <immintrin.h>
-#define PROBELESS_LIGHT_OCCLUSION_AVX2 1
 #endif
 
 namespace probeless::light::internal {
@@ -41,19 +42,16 @@ void OcclusionScalar(const OcclusionParams& p, const float* offsets, const float
   }
 }
 
-bool OcclusionSimdAvailable() {
-#ifdef PROBELESS_LIGHT_OCCLUSION_AVX2
-  return true;
-#else
-  return false;
+OcclusionFn OcclusionKernel() {
+#ifdef PROBELESS_SIMD_X86
+  if (simd::UseAvx2()) return OcclusionAvx2;
 #endif
+  return OcclusionScalar;
 }
 
-void OcclusionSimd(const OcclusionParams& p, const float* offsets, const float x[3],
-                   const float n[3], PixelOcclusion* out) {
-#ifndef PROBELESS_LIGHT_OCCLUSION_AVX2
-  OcclusionScalar(p, offsets, x, n, out);
-#else
+#ifdef PROBELESS_SIMD_X86
+PROBELESS_SIMD_AVX2 void OcclusionAvx2(const OcclusionParams& p, const float* offsets,
+                                       const float x[3], const float n[3], PixelOcclusion* out) {
   const __m256 x0 = _mm256_set1_ps(x[0]), x1 = _mm256_set1_ps(x[1]), x2 = _mm256_set1_ps(x[2]);
   const __m256 nx = _mm256_set1_ps(n[0]), ny = _mm256_set1_ps(n[1]), nz = _mm256_set1_ps(n[2]);
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
@@ -118,7 +116,7 @@ void OcclusionSimd(const OcclusionParams& p, const float* offsets, const float x
     _mm256_store_si256(reinterpret_cast<__m256i*>(out->occluder + j),
                        _mm256_blendv_epi8(none, q, _mm256_castps_si256(occ)));
   }
-#endif
 }
+#endif
 
 }  // namespace probeless::light::internal

@@ -1,6 +1,7 @@
 // Private to probeless_light: the inner loop of TransferComputer, the screen-space directional
 // occlusion of one pixel's N sample points against the main buffer G_r (Gruber et al. 2015,
-// §5.1, eq. 7-8), in a scalar reference version and an AVX2 version (8 directions per step).
+// §5.1, eq. 7-8), in a portable reference version and an AVX2/FMA version (8 directions per
+// step), chosen at run time (OcclusionKernel, probeless/simd/simd.h).
 #pragma once
 
 #include <cstdint>
@@ -44,11 +45,14 @@ struct PixelOcclusion {
 // table (n_padded values in [0.1, 1]).
 void OcclusionScalar(const OcclusionParams& p, const float* offsets, const float x[3],
                      const float n[3], PixelOcclusion* out);
-// Same results as OcclusionScalar up to float rounding; falls back to it when the library is built
-// without AVX2 (OcclusionSimdAvailable() == false).
-void OcclusionSimd(const OcclusionParams& p, const float* offsets, const float x[3],
+// Same results as OcclusionScalar up to float rounding (FMA; a sample within rounding of a
+// threshold may go either way). Only where simd::Supported() is kAvx2Fma (x86-64 builds).
+void OcclusionAvx2(const OcclusionParams& p, const float* offsets, const float x[3],
                    const float n[3], PixelOcclusion* out);
-// True when the library was built with AVX2 and FMA (then OcclusionSimd is the SIMD version).
-bool OcclusionSimdAvailable();
+
+using OcclusionFn = void (*)(const OcclusionParams&, const float*, const float[3], const float[3],
+                             PixelOcclusion*);
+// OcclusionAvx2 when simd::UseAvx2(), else OcclusionScalar (choose once per loop, not per pixel).
+OcclusionFn OcclusionKernel();
 
 }  // namespace probeless::light::internal

@@ -163,6 +163,7 @@ class Scorer {
       if (p.nx * l[0] + p.ny * l[1] + p.nz * l[2] > 0) facing.push_back(static_cast<int>(j));
     }
     const internal::ShadowRayParams ray = Ray();
+    const internal::ShadowRay8Fn shadow_ray8 = internal::ShadowRay8Kernel();
     for (size_t i = 0; i < facing.size(); i += 8) {
       float x[8] = {}, y[8] = {}, z[8] = {}, out[8];
       const size_t m = std::min<size_t>(8, facing.size() - i);
@@ -170,7 +171,7 @@ class Scorer {
         const Point& p = s.points[facing[i + k]];
         x[k] = p.x, y[k] = p.y, z[k] = p.z;
       }
-      internal::ShadowRay8(ray, x, y, z, l, out);
+      shadow_ray8(ray, x, y, z, l, out);
       for (size_t k = 0; k < m; ++k) (*vis)[facing[i + k]] = out[k];
     }
   }

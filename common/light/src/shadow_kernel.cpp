@@ -1,8 +1,9 @@
 #include "shadow_kernel.h"
 
-#if defined(__AVX2__) && defined(__FMA__)
+#include "probeless/simd/simd.h"
+
+#ifdef PROBELESS_SIMD_X86
 #include <immintrin.h>
-#define PROBELESS_LIGHT_SHADOW_AVX2 1
 #endif
 
 namespace probeless::light::internal {
@@ -30,11 +31,27 @@ float ShadowRayScalar(const ShadowRayParams& r, float px, float py, float pz,
   return hidden && r.unknown_behind ? -1.0f : 1.0f;
 }
 
+void ShadowRay8Scalar(const ShadowRayParams& r, const float* px, const float* py, const float* pz,
+                      const std::array<float, 3>& l, float out[8]) {
+  for (int i = 0; i < 8; ++i) out[i] = pz[i] > 0 ? ShadowRayScalar(r, px[i], py[i], pz[i], l) : 1;
+}
+
+ShadowRay8Fn ShadowRay8Kernel() {
+#ifdef PROBELESS_SIMD_X86
+  if (simd::UseAvx2()) return ShadowRay8Avx2;
+#endif
+  return ShadowRay8Scalar;
+}
+
 void ShadowRay8(const ShadowRayParams& r, const float* px, const float* py, const float* pz,
                 const std::array<float, 3>& l, float out[8]) {
-#ifndef PROBELESS_LIGHT_SHADOW_AVX2
-  for (int i = 0; i < 8; ++i) out[i] = pz[i] > 0 ? ShadowRayScalar(r, px[i], py[i], pz[i], l) : 1;
-#else
+  ShadowRay8Kernel()(r, px, py, pz, l, out);
+}
+
+#ifdef PROBELESS_SIMD_X86
+PROBELESS_SIMD_AVX2 void ShadowRay8Avx2(const ShadowRayParams& r, const float* px, const float* py,
+                                        const float* pz, const std::array<float, 3>& l,
+                                        float out[8]) {
   const __m256 x = _mm256_loadu_ps(px), y = _mm256_loadu_ps(py), z = _mm256_loadu_ps(pz);
   const __m256 half = _mm256_set1_ps(0.5f), zero = _mm256_setzero_ps();
   const __m256 fx = _mm256_set1_ps(r.fx), fy = _mm256_set1_ps(r.fy);
@@ -81,7 +98,7 @@ void ShadowRay8(const ShadowRayParams& r, const float* px, const float* py, cons
   __m256 result = _mm256_blendv_ps(one, _mm256_set1_ps(-1.0f), unknown);
   result = _mm256_blendv_ps(result, zero, occluded);
   _mm256_storeu_ps(out, result);
-#endif
 }
+#endif
 
 }  // namespace probeless::light::internal

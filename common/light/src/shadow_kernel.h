@@ -1,6 +1,6 @@
 // Private to probeless_light: the screen-space shadow ray of the cast-shadow search (shadow.cpp,
-// docs/light.md "Cast shadows"), in a scalar reference version and an AVX2 version (8 points per
-// call).
+// docs/light.md "Cast shadows"), in a portable reference version and an AVX2/FMA version (8 points
+// per call), chosen at run time (probeless/simd/simd.h).
 #pragma once
 
 #include <array>
@@ -30,9 +30,20 @@ struct ShadowRayParams {
 float ShadowRayScalar(const ShadowRayParams& r, float px, float py, float pz,
                       const std::array<float, 3>& l);
 
-// The same for 8 points (x, y, z of each), results in out[8]; up to float rounding identical to
-// ShadowRayScalar (falls back to it without AVX2). A point with z <= 0 gives 1.
+// The same for 8 points (x, y, z of each), results in out[8]; a point with z <= 0 gives 1.
+// ShadowRay8Scalar: ShadowRayScalar per point. ShadowRay8Avx2: up to float rounding identical
+// (FMA; a sample within rounding of a pixel border or the bias may go either way), only where
+// simd::Supported() is kAvx2Fma (x86-64 builds). ShadowRay8: the one ShadowRay8Kernel() picks.
+void ShadowRay8Scalar(const ShadowRayParams& r, const float* px, const float* py, const float* pz,
+                      const std::array<float, 3>& l, float out[8]);
+void ShadowRay8Avx2(const ShadowRayParams& r, const float* px, const float* py, const float* pz,
+                    const std::array<float, 3>& l, float out[8]);
 void ShadowRay8(const ShadowRayParams& r, const float* px, const float* py, const float* pz,
                 const std::array<float, 3>& l, float out[8]);
+
+using ShadowRay8Fn = void (*)(const ShadowRayParams&, const float*, const float*, const float*,
+                              const std::array<float, 3>&, float*);
+// ShadowRay8Avx2 when simd::UseAvx2(), else ShadowRay8Scalar (choose once per loop).
+ShadowRay8Fn ShadowRay8Kernel();
 
 }  // namespace probeless::light::internal

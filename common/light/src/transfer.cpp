@@ -204,6 +204,7 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
   occ_params.dir_y = directions_soa_.data() + n_padded_;
   occ_params.dir_z = directions_soa_.data() + 2 * n_padded_;
   internal::PixelOcclusion occ;
+  const internal::OcclusionFn occlusion = internal::OcclusionKernel();
 
   for (int r = row_begin; r < row_end; ++r) {
     const int v = std::min(y0_pixel + r * step + step / 2, h - 1);
@@ -228,7 +229,7 @@ void TransferComputer::ComputeRows(const GeometryView& g, const AuxiliaryBuffers
       const float* off = offsets_.data() + static_cast<size_t>((u & 1) + 2 * (v & 1)) * n_padded_;
       const float xp[3] = {x0, x1, x2}, np[3] = {nx, ny, nz};
       // Main buffer (§5.1, eq. 7-8), 8 directions per step where the CPU has AVX2.
-      internal::OcclusionSimd(occ_params, off, xp, np, &occ);
+      occlusion(occ_params, off, xp, np, &occ);
       if (!do_indirect && aux.views.empty()) {
         // Branch-free (vectorised): nothing else to test per direction.
         for (int j = 0; j < n_dir; ++j) {
