@@ -16,7 +16,8 @@ confidence, from composite_eval runs.
          Exits 1 when a bin is outside.
 
 Frames count when composite_eval scored their direction (direct / ambient >= 1 at the object:
-`direction_error_deg` in `per_frame`). Bins are quantiles of the confidence (equal counts).
+`direction_error_deg` in `per_frame`). Bins are quantiles of the confidence (equal counts; frames of
+equal confidence share a bin, so a bin may be larger and there may be fewer bins).
 """
 import argparse
 import json
@@ -42,12 +43,21 @@ def frames(paths):
     if not out:
         sys.exit("fit_confidence: no frame with direction_error_deg and ours_light in " +
                  ", ".join(paths))
-    return sorted(out)
+    return sorted(out, key=lambda r: r[0])  # by confidence only: ties keep the runs' order
 
 
 def bins(rows, count):
+    """Equal-count bins of rows sorted by confidence; frames of equal confidence share a bin."""
     count = max(1, min(count, len(rows)))
-    return [rows[k * len(rows) // count:(k + 1) * len(rows) // count] for k in range(count)]
+    out, start = [], 0
+    for k in range(1, count + 1):
+        end = max(start, k * len(rows) // count)
+        while 0 < end < len(rows) and rows[end][0] == rows[end - 1][0]:
+            end += 1
+        if end > start:
+            out.append(rows[start:end])
+        start = end
+    return out
 
 
 def expected_error(confidence):
@@ -100,7 +110,8 @@ def check(args):
         knots = [float(v) for v in args.knots.split(",")]
         if len(knots) < 2 or len(knots) % 2:
             sys.exit("fit_confidence: --knots needs pairs R,E,...")
-        rows = sorted((calibrate(knots, raw), error, name) for raw, error, name in rows)
+        rows = sorted(((calibrate(knots, raw), error, name) for raw, error, name in rows),
+                      key=lambda r: r[0])
     bad = 0
     print(f"{len(rows)} frames of {len(set(r[2] for r in rows))} scenes")
     print("| confidence bin | expected error | median error | ratio | within |")
