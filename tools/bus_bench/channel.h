@@ -33,6 +33,9 @@ class PubChannel {
   // Moves queued outgoing bytes on (UDS only) until nothing is pending or CLOCK_MONOTONIC reaches
   // `deadline_ns`; `spin` polls without sleeping. Returns true if bytes are still pending.
   virtual bool Pump(int64_t deadline_ns, bool spin) { return false; }
+  // Messages the transport skipped for a subscriber on the publisher side so far, summed over
+  // subscribers (-1 when it does not count them there).
+  virtual int64_t TransportDrops() const { return -1; }
 };
 
 class SubChannel {

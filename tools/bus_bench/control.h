@@ -67,10 +67,16 @@ struct PubResult {
   uint32_t attempted[kMaxTopicsPerPub] = {};  // messages the publisher tried to send
   uint32_t sent[kMaxTopicsPerPub] = {};       // … and sent (a failed loan is not sent)
   uint32_t loan_failures = 0;
+  // Messages the transport itself skipped on the publisher side (UDS: drop-newest while a frame
+  // is still pending), summed over subscribers; -1 if it does not count them there.
+  int64_t transport_drops[kMaxTopicsPerPub] = {};
   int64_t first_stamp_ns = 0;
   int64_t last_stamp_ns = 0;
   int64_t max_publish_ns = 0;  // longest Loan + Publish call (payload filling excluded)
   int64_t max_late_ns = 0;     // worst pacing lateness
+  // Longest time from the pacing wake-up to the header stamp (loan + payload fill): consecutive
+  // stamps of a paced phase are at least (period - max_fill_ns) apart.
+  int64_t max_fill_ns = 0;
 };
 
 struct SubResult {
@@ -78,6 +84,9 @@ struct SubResult {
   uint32_t received[kMaxTopics] = {};
   uint32_t checksum_errors[kMaxTopics] = {};
   uint32_t stale[kMaxTopics] = {};
+  // Messages whose sequence number was not above the one taken before on the topic (a duplicate
+  // or out of order): the transport broke ordering or integrity (target 0).
+  uint32_t reordered[kMaxTopics] = {};
   int64_t transport_drops[kMaxTopics] = {};  // as counted by the transport, -1 if it does not
   int64_t first_recv_ns[kMaxTopics] = {};
   int64_t last_recv_ns[kMaxTopics] = {};

@@ -113,8 +113,10 @@ struct SubOutcome {
   uint32_t received[kMaxTopics] = {};
   uint32_t checksum_errors = 0;
   uint32_t stale = 0;
-  int64_t transport_drops = 0;  // -1: not counted by the transport
-  int64_t first_recv_ns = 0;    // earliest first receipt over its topics (0: none)
+  uint32_t reordered = 0;
+  int64_t transport_drops = 0;           // -1: not counted by the transport
+  int64_t topic_drops[kMaxTopics] = {};  // … per topic (-1: not counted)
+  int64_t first_recv_ns = 0;             // earliest first receipt over its topics (0: none)
   int64_t last_recv_ns = 0;
   int64_t max_gap_ns = 0;    // longest interval between two takes of one topic
   int64_t run_delay_ns = 0;  // run-queue wait of its receiving threads, -1: unknown
@@ -173,6 +175,8 @@ class Session {
         s.received[g] = r.received[g];
         s.checksum_errors += r.checksum_errors[g];
         s.stale += r.stale[g];
+        s.reordered += r.reordered[g];
+        s.topic_drops[g] = r.transport_drops[g];
         if (r.transport_drops[g] < 0) {
           s.transport_drops = -1;
         } else if (s.transport_drops >= 0) {
@@ -310,28 +314,88 @@ class Session {
 struct RowTotals {
   std::vector<int64_t> latencies;
   uint64_t lost = 0;
+  int64_t counted_drops = 0;  // -1 once a phase's drops were not counted by the transport
+  int64_t unexplained = 0;
   int64_t checksum_errors = 0;
   int64_t stale = 0;
+  int64_t reordered = 0;
 };
 
-// Adds the fast subscribers' latencies (after warm-up) and losses of one phase.
-void Accumulate(const PhaseOutcome& o, const Phase& ph, uint32_t topics_per_pub, bool latencies,
-                RowTotals* totals, const std::function<bool(uint32_t)>& topic_filter) {
+// Adds the fast subscribers' latencies (after warm-up) and losses of one phase, and accounts for
+// the losses, per topic and summed over the fast subscribers. A miss is explained when
+// - the transport counted it (probeless: the subscriber's `dropped`, its queue's drop-oldest or
+//   the pool's; UDS: the publisher's drop-newest of a subscriber whose frame was still pending):
+//   counted and missed must agree exactly, and
+// - for drop-oldest queues (probeless, iceoryx) in a paced phase, the subscriber fell behind far
+//   enough to fill its queue: a queue of depth D drops only when D messages are queued, and the
+//   subscriber then takes the oldest survivor at least (D - 1) publish intervals after it was
+//   stamped, so some taken message's latency is >= (D - 1) * period - max_fill (stamps are paced
+//   at least period - max_fill apart, the end marker included). A transport that does not count
+//   (iceoryx) is explained by this alone.
+// Unpaced phases are flow-controlled (window <= D, the end marker inside it): no miss is
+// explained there. Whatever load does to the scheduling, an explained miss is the documented
+// keep-last policy; an unexplained one is a transport (or harness) bug.
+void Accumulate(const PhaseOutcome& o, const Phase& ph, Transport transport,
+                uint32_t topics_per_pub, bool latencies, RowTotals* totals,
+                const std::function<bool(uint32_t)>& topic_filter) {
   for (uint32_t s = 0; s < o.subs.size(); ++s) {
     const SubOutcome& sub = o.subs[s];
     totals->checksum_errors += sub.checksum_errors;
     totals->stale += sub.stale;
-    if (ph.slow_mask & (1u << s)) continue;
-    for (uint32_t p = 0; p < o.pubs.size(); ++p) {
-      for (uint32_t t = 0; t < topics_per_pub; ++t) {
-        const uint32_t g = p * topics_per_pub + t;
-        if (!topic_filter(g)) continue;
+    totals->reordered += sub.reordered;
+  }
+  const bool drop_oldest = transport != Transport::kUds;
+  for (uint32_t p = 0; p < o.pubs.size(); ++p) {
+    for (uint32_t t = 0; t < topics_per_pub; ++t) {
+      const uint32_t g = p * topics_per_pub + t;
+      if (!topic_filter(g)) continue;
+      int64_t missed = 0;
+      int64_t counted = 0;  // -1: not counted
+      int64_t max_latency = 0;
+      // Publisher-side counts are summed over every subscriber: attributable with no slow one.
+      const int64_t pub_drops = ph.slow_mask != 0 ? -1 : o.pubs[p].transport_drops[t];
+      bool any_counted = pub_drops >= 0;
+      if (pub_drops > 0) counted += pub_drops;
+      for (uint32_t s = 0; s < o.subs.size(); ++s) {
+        if (ph.slow_mask & (1u << s)) continue;
+        const SubOutcome& sub = o.subs[s];
         const uint32_t attempted = o.pubs[p].attempted[t];
         totals->lost += attempted > sub.received[g] ? attempted - sub.received[g] : 0;
+        // A failed loan is the publisher's (loan_failures), not the transport's.
+        missed += int64_t{o.pubs[p].sent[t]} - sub.received[g];
+        if (sub.topic_drops[g] >= 0) {
+          any_counted = true;
+          counted += sub.topic_drops[g];
+        }
+        for (const LatencyRecord& r : sub.records) {
+          if (r.topic == g) max_latency = std::max(max_latency, r.latency_ns);
+        }
       }
+      if (!any_counted) counted = -1;
+      if (counted < 0 || totals->counted_drops < 0) {
+        totals->counted_drops = -1;
+      } else {
+        totals->counted_drops += counted;
+      }
+      if (missed == 0 && counted <= 0) continue;
+      int64_t unexplained = 0;
+      if (ph.period_ns == 0) {
+        unexplained = std::max<int64_t>(missed, counted);
+      } else {
+        if (counted >= 0) unexplained = std::abs(missed - counted);
+        const int64_t backlog_ns =
+            (int64_t{kQueueDepth} - 1) * ph.period_ns - o.pubs[p].max_fill_ns;
+        if (drop_oldest && max_latency < backlog_ns) {
+          unexplained = std::max<int64_t>(missed, counted);
+        }
+      }
+      totals->unexplained += unexplained;
     }
-    if (!latencies) continue;
-    for (const LatencyRecord& r : sub.records) {
+  }
+  if (!latencies) return;
+  for (uint32_t s = 0; s < o.subs.size(); ++s) {
+    if (ph.slow_mask & (1u << s)) continue;
+    for (const LatencyRecord& r : o.subs[s].records) {
       if (r.seq > ph.warmup && topic_filter(r.topic)) totals->latencies.push_back(r.latency_ns);
     }
   }
@@ -436,10 +500,13 @@ class Orchestrator {
 
   void Emit(Row row, const RowTotals& totals) {
     row.lost = totals.lost;
+    row.counted_drops = totals.counted_drops;
+    row.unexplained = totals.unexplained;
     row.checksum_errors = totals.checksum_errors;
     row.stale = totals.stale;
+    row.reordered = totals.reordered;
     SetLatencies(row, totals.latencies);
-    if (row.checksum_errors != 0 || row.stale != 0) ++errors_;
+    if (row.checksum_errors != 0 || row.stale != 0 || row.reordered != 0) ++errors_;
     PrintRow(row);
     rows_.push_back(row);
   }
@@ -510,7 +577,7 @@ class Orchestrator {
               const Transport t = plan_.transports[(k + chunk) % plan_.transports.size()];
               const auto o = run(t, lat);
               if (!o) continue;
-              Accumulate(*o, lat, 1, true, &totals[t], [](uint32_t) { return true; });
+              Accumulate(*o, lat, t, 1, true, &totals[t], [](uint32_t) { return true; });
               rows[t].max_publish_us = std::max(
                   rows[t].max_publish_us, static_cast<double>(o->pubs[0].max_publish_ns) / 1e3);
               rows[t].loan_failures += o->pubs[0].loan_failures;
@@ -519,7 +586,7 @@ class Orchestrator {
           for (Transport t : plan_.transports) {
             const auto o = run(t, tput);
             if (!o) continue;
-            Accumulate(*o, tput, 1, false, &totals[t], [](uint32_t) { return true; });
+            Accumulate(*o, tput, t, 1, false, &totals[t], [](uint32_t) { return true; });
             rows[t].msgs_per_s = Throughput(*o, tput);
             rows[t].mb_per_s = rows[t].msgs_per_s * static_cast<double>(size) / 1e6;
             rows[t].loan_failures += o->pubs[0].loan_failures;
@@ -558,7 +625,7 @@ class Orchestrator {
       try {
         RowTotals totals;
         const PhaseOutcome o = session->Run(ph);
-        Accumulate(o, ph, 1, true, &totals, [](uint32_t) { return true; });
+        Accumulate(o, ph, transport, 1, true, &totals, [](uint32_t) { return true; });
         const PubResult& pub = o.pubs[0];
         const SubOutcome& slow = o.subs[2];
         row.slow_received = slow.received[0];
@@ -638,7 +705,7 @@ class Orchestrator {
         for (uint32_t kind = 0; kind < 2; ++kind) {
           RowTotals totals;
           auto of_kind = [kind](uint32_t topic) { return topic % 2 == kind; };
-          Accumulate(o, ph, 2, true, &totals, of_kind);
+          Accumulate(o, ph, transport, 2, true, &totals, of_kind);
           Row row;
           row.transport = TransportKey(transport);
           row.scenario = "4x_rgbd_30fps";

@@ -21,6 +21,13 @@ struct Row {
   double msgs_per_s = 0;  // throughput (unpaced run; scenarios: delivered rate)
   double mb_per_s = 0;
   uint64_t lost = 0;  // messages a fast subscriber did not get (latency + throughput runs)
+  // What the losses were (see Accumulate in main.cpp): `counted_drops` of them counted by the
+  // transport itself (-1: it does not count them), `unexplained` neither counted nor the
+  // documented queue policy of a subscriber that fell a queue depth behind: the transport's or
+  // the harness's fault (target 0 under any load).
+  int64_t counted_drops = 0;
+  int64_t unexplained = 0;
+  int64_t reordered = 0;  // messages taken with a sequence number not above the previous one
   // Extras.
   double max_publish_us = -1;  // longest Loan + Publish call in the latency run
   int64_t loan_failures = 0;

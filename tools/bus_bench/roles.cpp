@@ -198,6 +198,8 @@ class PublisherRole {
     }
     PubResult& r = c_.pubs[index_];
     r = PubResult{};
+    std::vector<int64_t> drops_before(channels_.size());
+    for (size_t t = 0; t < channels_.size(); ++t) drops_before[t] = channels_[t]->TransportDrops();
     const int64_t start = MonoNs() + 2'000'000 + index_ * ph.stagger_ns;
     if (ph.period_ns > 0) {
       int64_t tick = start;
@@ -206,7 +208,7 @@ class PublisherRole {
         WaitUntil(tick, ph.busy);
         const int64_t woke = MonoNs();
         r.max_late_ns = std::max(r.max_late_ns, woke - tick);
-        for (uint32_t t = 0; t < channels_.size(); ++t) PublishOne(ph, t, k);
+        for (uint32_t t = 0; t < channels_.size(); ++t) PublishOne(ph, t, k, woke);
         // The next message one period after this one at the earliest, like a camera: a publisher
         // descheduled for N periods must not publish the N ticks it missed back to back. That
         // burst (1.5 MB frames at memset speed, ~10x the paced rate) overflows every depth-4
@@ -214,14 +216,25 @@ class PublisherRole {
         // as fast-subscriber losses of a 1 kHz stream (issue #22's `lost: 1`).
         tick = std::max(tick, woke) + ph.period_ns;
       }
+      // The end marker is paced like a message: published at once it would be one message more
+      // in a queue the last message may have just filled, and drop-oldest would drop a real one
+      // for a subscriber that was keeping up.
+      WaitUntil(tick, ph.busy);
     } else {
       WaitUntil(start, ph.busy);
       const int64_t end = start + ph.duration_ns;
-      for (uint32_t k = 1; k <= ph.count && MonoNs() < end; ++k) {
+      uint32_t k = 1;
+      for (; k <= ph.count && MonoNs() < end; ++k) {
         if (c_.failed.load(std::memory_order_relaxed)) throw std::runtime_error("stopped");
         WaitWindow(ph, k);
-        PublishOne(ph, 0, k);
+        PublishOne(ph, 0, k, MonoNs());
       }
+      // The end marker inside the window too, for the same reason.
+      WaitWindow(ph, k);
+    }
+    for (size_t t = 0; t < channels_.size(); ++t) {
+      const int64_t after = channels_[t]->TransportDrops();
+      r.transport_drops[t] = after < 0 || drops_before[t] < 0 ? -1 : after - drops_before[t];
     }
     // Hand every byte to the kernel (UDS), then end the phase on every topic with a marker.
     FlushAll();
@@ -287,7 +300,8 @@ class PublisherRole {
     }
   }
 
-  void PublishOne(const Phase& ph, uint32_t t, uint32_t seq) {
+  // Publishes message `seq` on topic `t`; `woke` is when its pacing wait ended.
+  void PublishOne(const Phase& ph, uint32_t t, uint32_t seq, int64_t woke) {
     PubResult& r = c_.pubs[index_];
     PubChannel& ch = *channels_[t];
     const uint32_t size = ph.sizes[t];
@@ -314,6 +328,7 @@ class PublisherRole {
     std::memcpy(p, &h, sizeof(h));
     ch.Publish();
     const int64_t t2 = MonoNs();
+    r.max_fill_ns = std::max(r.max_fill_ns, h.stamp_ns - woke);
     r.max_publish_ns = std::max(r.max_publish_ns, (t1 - t0) + (t2 - h.stamp_ns));
     if (r.first_stamp_ns == 0) r.first_stamp_ns = h.stamp_ns;
     r.last_stamp_ns = h.stamp_ns;
@@ -374,7 +389,7 @@ class SubscriberRole {
     SubResult& r = c_.subs[index_];
     r.n_records.store(0);
     for (uint32_t g = 0; g < kMaxTopics; ++g) {
-      r.received[g] = r.checksum_errors[g] = r.stale[g] = 0;
+      r.received[g] = r.checksum_errors[g] = r.stale[g] = r.reordered[g] = 0;
       r.first_recv_ns[g] = r.last_recv_ns[g] = r.max_gap_ns[g] = 0;
       r.transport_drops[g] = 0;
     }
@@ -421,6 +436,7 @@ class SubscriberRole {
     const bool slow = (ph.slow_mask & (1u << index_)) != 0;
     bool draining = false;
     int64_t previous_take_ns = 0;
+    uint32_t previous_seq = 0;
     const int64_t run_delay_before = ThreadRunDelayNs();
     // Every way out of the loop adds this thread's run-queue wait to the subscriber's.
     struct RunDelay {
@@ -461,6 +477,8 @@ class SubscriberRole {
         ch.Release();
         return;
       }
+      if (h.seq <= previous_seq) r.reordered[g] += 1;
+      previous_seq = h.seq;
       if (ph.write_payload && !PayloadMatches(data, h.fill)) r.checksum_errors[g] += 1;
       const uint32_t n = r.n_records.fetch_add(1, std::memory_order_relaxed);
       if (n < kMaxRecords) r.records[n] = {now - h.stamp_ns, g, h.seq};

@@ -3,7 +3,7 @@
 // Frames are an 8-byte length followed by the payload. The publisher never blocks: it sends with
 // MSG_DONTWAIT, keeps the unsent rest of a frame (one per subscriber, no copy: the loan buffer
 // stays referenced) and moves it on in Pump(); a subscriber whose previous frame is still pending
-// misses the new message (drop-newest, counted by the subscriber from sequence gaps).
+// misses the new message (drop-newest, counted by the publisher: TransportDrops()).
 #include <poll.h>
 #include <sys/socket.h>
 #include <sys/un.h>
@@ -98,7 +98,10 @@ class UdsPub final : public PubChannel {
     const size_t frame_bytes = kLengthBytes + current_bytes_;
     for (Conn& c : conns_) {
       Flush(c);
-      if (c.buffer >= 0) continue;  // still sending an older frame: this subscriber misses one
+      if (c.buffer >= 0) {  // still sending an older frame: this subscriber misses one
+        ++skipped_;
+        continue;
+      }
       const ssize_t n = send(c.fd, frame, frame_bytes, MSG_DONTWAIT | MSG_NOSIGNAL);
       if (n < 0 && errno != EAGAIN) Fail("send");
       const size_t sent = n < 0 ? 0 : static_cast<size_t>(n);
@@ -110,6 +113,8 @@ class UdsPub final : public PubChannel {
     }
     current_ = -1;
   }
+
+  int64_t TransportDrops() const override { return skipped_; }
 
   uint32_t Subscribers(uint32_t) override {
     for (;;) {
@@ -170,6 +175,7 @@ class UdsPub final : public PubChannel {
   std::vector<Conn> conns_;
   int current_ = -1;
   size_t current_bytes_ = 0;
+  int64_t skipped_ = 0;  // messages not sent to a subscriber whose previous frame was pending
 };
 
 class UdsSub final : public SubChannel {
