@@ -254,6 +254,10 @@ TEST(ScenePipeline, PointModelWarmStartsAndResetsWhenStampsGoBack) {
   so.model = o.light_model;
   so.distant = o.estimate;
   so.point = o.point;
+  // One albedo model for both fits, as the pipeline composes them.
+  so.point.albedo = o.estimate.albedo;
+  so.point.albedo_groups = o.estimate.albedo_groups;
+  so.point.albedo_invariant = o.estimate.albedo_invariant;
   so.shadow.enabled = false;
   light::PointLightTracker tracker;
 

@@ -21,7 +21,7 @@
 //   albedo 1; from the second frame on, none after a frame without an estimated light). A frame
 //   without camera info or image yet is skipped (one warning).
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
-//   seed (1), threads (2), albedo (0.6), stride (4), robust (true), non_negative (false),
+//   seed (1), threads (2), albedo (0.25), stride (4), robust (true), non_negative (false),
 //   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
 //   0 = one uniform albedo), max_rows_per_bin (100),
 //   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true),
@@ -89,7 +89,7 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   to.threads = node.Param("threads", 2);
   to.analytic_unoccluded = node.Param("analytic_unoccluded", true);
   light::EstimateOptions& eo = po.estimate;
-  eo.albedo = static_cast<float>(node.Param("albedo", 0.6));
+  eo.albedo = static_cast<float>(node.Param("albedo", static_cast<double>(eo.albedo)));
   eo.stride = node.Param("stride", 4);
   eo.robust = node.Param("robust", true);
   eo.non_negative = node.Param("non_negative", false);

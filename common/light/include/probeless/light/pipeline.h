@@ -59,8 +59,11 @@ struct ScenePipelineOptions {
   TransferOptions transfer;
   // The distant fit (§5.2). Its albedo, albedo_groups and albedo_invariant are also the point
   // fit's (point's own are overwritten: one albedo model for both models).
-  // The light prior is on (LightPrior; weight and ratios as the node's prior_* params).
-  EstimateOptions estimate{.prior = {.weight = 3.0, .zonal = {1.0f, 0.9f, 1.06f, 0.0f}}};
+  // The light prior is on (LightPrior; weight and ratios as the node's prior_* params). The
+  // assumed mean albedo 0.25 sets the light's level: the level of the light at an inserted object
+  // best matched with it on the evaluation world's validation split (docs/light.md "Light level").
+  EstimateOptions estimate{.albedo = 0.25f,
+                           .prior = {.weight = 3.0, .zonal = {1.0f, 0.9f, 1.06f, 0.0f}}};
 
   // G-buffer input: its depth first smoothed by SmoothDepth of radius `gbuffer_smooth_radius` (0 =
   // none: G_r is denoised by the merge), its normals kept or recomputed `gbuffer_normal_step`
