@@ -129,7 +129,7 @@ light::ScenePipelineOptions SmallOptions() {
   o.estimate.prior.weight = 0;
   // ... and the fit's own confidence, as the direct calls publish it (the calibration:
   // up_prior_test.cpp).
-  o.confidence_knots.clear();
+  o.confidence_knots.emplace();
   return o;
 }
 

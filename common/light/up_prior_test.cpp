@@ -247,7 +247,18 @@ TEST(ScenePipeline, PriorIsOnByDefaultAboutTheEstimatedUp) {
 TEST(ScenePipeline, ConfidenceIsTheCalibratedExpectedError) {
   // The default table: raw ascending, expected error non-increasing, so the published confidence
   // is in [0, 1] and monotone in the fit's.
-  const std::vector<double> knots = light::DefaultSceneConfidenceKnots();
+  for (const auto source :
+       {light::SceneGeometrySource::kGeometryBuffer, light::SceneGeometrySource::kDepthImage}) {
+    const std::vector<double> knots = light::DefaultSceneConfidenceKnots(source);
+    ASSERT_GE(knots.size(), 4u);
+    ASSERT_EQ(knots.size() % 2, 0u);
+    for (size_t k = 2; k < knots.size(); k += 2) {
+      EXPECT_GT(knots[k], knots[k - 2]);
+      EXPECT_LE(knots[k + 1], knots[k - 1]);
+    }
+  }
+  const std::vector<double> knots =
+      light::DefaultSceneConfidenceKnots(light::SceneGeometrySource::kGeometryBuffer);
   ASSERT_GE(knots.size(), 4u);
   ASSERT_EQ(knots.size() % 2, 0u);
   for (size_t k = 2; k < knots.size(); k += 2) {
@@ -289,12 +300,12 @@ TEST(ScenePipeline, ConfidenceIsTheCalibratedExpectedError) {
   EXPECT_FLOAT_EQ(r.light.confidence, static_cast<float>(table.Apply(r.evidence.fit_confidence)));
   EXPECT_GE(r.evidence.prior_shift_deg, 0);
   EXPECT_LE(r.evidence.prior_shift_deg, 180);
-  o.confidence_knots.clear();
+  o.confidence_knots.emplace();
   light::ScenePipeline raw(o);
   const light::ScenePipelineResult& q = raw.Process(f);
   EXPECT_EQ(q.light.confidence, q.evidence.fit_confidence);
 
-  o.confidence_knots = {0.5, 20, 0.2, 30};
+  o.confidence_knots = std::vector<double>{0.5, 20, 0.2, 30};
   EXPECT_EQ(ErrorOf([&] { light::ScenePipeline bad(o); }),
             "light::ScenePipeline: confidence_knots: confidence calibration: knot 1 needs a raw "
             "confidence in [0, 1] above the previous one and an error > 0");

@@ -42,7 +42,7 @@
 //   mode: ShadowOptions::image_cues, light::RawDepthShadowOptions), shadow_stride (8),
 //   shadows_override_prior (true: an accepted shadow direction overrides the light prior,
 //   light::ScenePipelineOptions::shadows_override_prior), confidence_calibration (knots: fit
-//   confidence, expected error in degrees; default light::DefaultSceneConfidenceKnots),
+//   confidence, expected error in degrees; default light::DefaultSceneConfidenceKnots of the mode),
 //   raw_confidence (false: publish the fit confidence uncalibrated), shadow_depth (raw; gbuffer
 //   mode: the search on the frame's depth image with the image cues, or on G_r without them:
 //   "gbuffer"), use_aux (false; gbuffer mode: the auxiliary orthographic views fusion publishes
@@ -149,8 +149,9 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.shadows_override_prior = node.Param("shadows_override_prior", true);
   // The published confidence on the ShLight scale (light::ScenePipelineOptions::confidence_knots);
   // raw_confidence publishes the fit's own (the input of tools/light_prior/fit_confidence.py).
-  po.confidence_knots = node.Param("confidence_calibration", po.confidence_knots);
-  if (node.Param("raw_confidence", false)) po.confidence_knots.clear();
+  po.confidence_knots =
+      node.Param("confidence_calibration", light::DefaultSceneConfidenceKnots(po.source));
+  if (node.Param("raw_confidence", false)) po.confidence_knots->clear();
   po.shadow.threads = to.threads;
   if (po.shadow.stride < 1) {
     throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +

@@ -35,10 +35,14 @@ double MsSince(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+std::vector<double> KnotsOf(const ScenePipelineOptions& o) {
+  return o.confidence_knots ? *o.confidence_knots : DefaultSceneConfidenceKnots(o.source);
+}
+
 void Validate(const ScenePipelineOptions& o) {
   const std::string what = "light::ScenePipeline: ";
   try {
-    ConfidenceCalibration calibration(o.confidence_knots);
+    ConfidenceCalibration calibration(KnotsOf(o));
   } catch (const FusionError& e) {
     throw LightError(what + "confidence_knots: " + e.what());
   }
@@ -81,14 +85,17 @@ void Validate(const ScenePipelineOptions& o) {
 
 }  // namespace
 
-std::vector<double> DefaultSceneConfidenceKnots() {
+std::vector<double> DefaultSceneConfidenceKnots(SceneGeometrySource source) {
   // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md).
+  if (source == SceneGeometrySource::kDepthImage) {
+    return {0.002, 66.2, 0.225, 51.2, 0.412, 40.9, 0.838, 29.8};
+  }
   return {0.002, 61.8, 0.146, 44.3, 0.279, 35.2, 0.490, 30.7};
 }
 
 struct ScenePipeline::State {
   explicit State(const ScenePipelineOptions& o)
-      : options(o), computer(o.transfer), temporal(o.temporal), confidence(o.confidence_knots) {
+      : options(o), computer(o.transfer), temporal(o.temporal), confidence(KnotsOf(o)) {
     scene.model = o.light_model;
     scene.distant = o.estimate;
     scene.point = o.point;

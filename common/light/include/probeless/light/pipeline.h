@@ -32,6 +32,12 @@ enum class SceneGeometrySource {
   kDepthImage,      // SceneFrame::depth_image: raw depth, normals by DepthGeometry (no recon)
 };
 
+// The default ScenePipelineOptions::confidence_knots of a geometry source (pairs: fit confidence
+// ascending, expected error in degrees): the reliability tables of the evaluation world's train and
+// validation splits in gbuffer and in depth mode (the two modes' fit confidences mean different
+// errors).
+std::vector<double> DefaultSceneConfidenceKnots(SceneGeometrySource source);
+
 // The normals of a G-buffer input (the node's `gbuffer_normals`).
 enum class GBufferNormals {
   kGiven,    // the buffer's own (fusion's)
@@ -46,10 +52,6 @@ enum class ShadowGeometry {
   kDepthImage,
   kGeometryBuffer,  // always the G-buffer
 };
-
-// The default ScenePipelineOptions::confidence_knots (pairs: fit confidence ascending, expected
-// error in degrees).
-std::vector<double> DefaultSceneConfidenceKnots();
 
 // Every option of the node and the evaluation; the defaults are the node's (docs/nodes.md,
 // scene_light) for subsample 1.
@@ -120,10 +122,11 @@ struct ScenePipelineOptions {
   // The published confidence on msgs::ShLight's scale (light/fusion.h: c = 1 / (1 + (e / 10
   // deg)^2), e the expected dominant-direction error): knots (fit confidence, median direction
   // error in degrees) of ConfidenceCalibration, applied to the published model's fit confidence
-  // (SceneEvidence::fit_confidence). The default is the reliability table of the evaluation world's
-  // train and validation splits (tools/light_prior/fit_confidence.py, docs/light.md "Confidence");
-  // empty = publish the fit confidence itself.
-  std::vector<double> confidence_knots = DefaultSceneConfidenceKnots();
+  // (SceneEvidence::fit_confidence). Unset: DefaultSceneConfidenceKnots(source), the reliability
+  // table of the evaluation world's train and validation splits
+  // (tools/light_prior/fit_confidence.py, docs/light.md "Confidence"); empty = publish the fit
+  // confidence itself.
+  std::optional<std::vector<double>> confidence_knots;
 
   // The one-bounce indirect buffer (eq. 10-12) from the previous frame's dominant light: in the
   // result's transfer from the second frame on (none after a frame without a light).
