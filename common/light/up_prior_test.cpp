@@ -69,6 +69,18 @@ struct TiltedView {
     }
   }
   light::GeometryView View() const { return {w, h, k, depth, normals, {}}; }
+  // The shading of a light from above and in front: I = 0.5 (0.2 + max(0, n.l)), l = (0, -0.8,
+  // -0.6) in the camera frame.
+  std::vector<float> Shaded() const {
+    const std::array<double, 3> l{0, -0.8, -0.6};
+    std::vector<float> grey(static_cast<size_t>(w) * h, 0);
+    for (size_t i = 0; i < grey.size(); ++i) {
+      const float* nn = &normals[3 * i];
+      grey[i] = static_cast<float>(
+          0.5 * (0.2 + std::max(0.0, nn[0] * l[0] + nn[1] * l[1] + nn[2] * l[2])));
+    }
+    return grey;
+  }
   // The pipeline's G-buffer input with image `grey` (borrowed; no colour).
   light::SceneFrame Input(std::span<const float> grey) const {
     light::SceneFrame f;
@@ -83,7 +95,7 @@ struct TiltedView {
 };
 
 TEST(UpDirection, FindsTheFloorOfATiltedRolledCamera) {
-  for (const auto [pitch, roll] : {std::pair{35.0, 10.0}, {10.0, -15.0}, {50.0, 0.0}}) {
+  for (const auto& [pitch, roll] : {std::pair{35.0, 10.0}, {10.0, -15.0}, {50.0, 0.0}}) {
     const TiltedView view(pitch, roll);
     const light::UpDirection up = light::EstimateUpDirection(view.View());
     ASSERT_TRUE(up.valid) << pitch << " " << roll;
@@ -213,15 +225,7 @@ TEST(ScenePipeline, GreyWorldColourIsTheMeanLinearColour) {
 
 TEST(ScenePipeline, PriorIsOnByDefaultAboutTheEstimatedUp) {
   const TiltedView view(30, 5);
-  const size_t n = static_cast<size_t>(view.w) * view.h;
-  // Shading of a light from above and in front: I = 0.5 (0.2 + max(0, n.l)).
-  const std::array<double, 3> l{0, -0.8, -0.6};
-  std::vector<float> grey(n, 0);
-  for (size_t i = 0; i < n; ++i) {
-    const float* nn = &view.normals[3 * i];
-    grey[i] =
-        static_cast<float>(0.5 * (0.2 + std::max(0.0, nn[0] * l[0] + nn[1] * l[1] + nn[2] * l[2])));
-  }
+  const std::vector<float> grey = view.Shaded();
   light::ScenePipelineOptions o;
   ASSERT_GT(o.estimate.prior.weight, 0);
   o.transfer.directions = 16;
@@ -280,14 +284,7 @@ TEST(ScenePipeline, ConfidenceIsTheCalibratedExpectedError) {
 
   // The pipeline publishes the table's confidence of its fit's; empty knots publish the fit's.
   const TiltedView view(30, 5);
-  const size_t n = static_cast<size_t>(view.w) * view.h;
-  const std::array<double, 3> l{0, -0.8, -0.6};
-  std::vector<float> grey(n, 0);
-  for (size_t i = 0; i < n; ++i) {
-    const float* nn = &view.normals[3 * i];
-    grey[i] =
-        static_cast<float>(0.5 * (0.2 + std::max(0.0, nn[0] * l[0] + nn[1] * l[1] + nn[2] * l[2])));
-  }
+  const std::vector<float> grey = view.Shaded();
   light::ScenePipelineOptions o;
   o.transfer.directions = 16;
   o.light_model = light::LightModel::kDistant;
