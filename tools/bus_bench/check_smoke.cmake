@@ -3,9 +3,8 @@
 # with it and its RouDi could start).
 #
 # Delivery is checked by what holds under any load, not by `lost == 0`: a subscriber descheduled
-# by other load for a queue depth of periods (4 x 4 ms here; 14-100 ms stalls are common on a
-# loaded 2-core machine) is a slow subscriber then, and its queue drops by the documented
-# keep-last policy. So in every row nothing taken is out of order or duplicated (`reordered`),
+# by other load for a queue depth of periods (4 x 4 ms here) is a slow subscriber then, and its
+# queue drops by the documented keep-last policy. So in every row nothing taken is out of order or duplicated (`reordered`),
 # corrupt (`checksum_errors`) or stale, and in every 1->1 row and the probeless slow_subscriber row
 # `unexplained == 0`: each miss is counted by the transport itself (probeless: the subscriber's
 # `dropped`; UDS: the publisher's drop-newest) with the count equal to the misses, and for
