@@ -413,6 +413,11 @@ TEST(Shadow, AcceptedShadowsOverrideTheLightPrior) {
               e_fit, e_off, e_on);
   EXPECT_LT(e_on, 6.0);
   EXPECT_LT(e_on, e_off);
+  // The evidence: the shadows set the direction, and the prior had moved the fit.
+  EXPECT_TRUE(r_on.evidence.shadow_accepted);
+  EXPECT_GT(r_on.evidence.prior_shift_deg, 1.0f);
+  EXPECT_LE(r_on.evidence.prior_shift_deg, 180.0f);
+  EXPECT_EQ(r_off.evidence.prior_shift_deg, 0.0f);  // no prior-free fit without the override
 }
 
 }  // namespace

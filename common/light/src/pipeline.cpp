@@ -294,7 +294,7 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   const auto t_estimate = Clock::now();
   const double cpu_estimate = ThreadCpuMs();
   // The fit without the prior (computed once, when a distant light with the prior needs it):
-  // the shadow search's seed (shadows_override_prior) and the evidence's prior_shift_deg.
+  // the shadow search's seed (shadows_override_prior), and then the evidence's prior_shift_deg.
   const bool prior_on = estimate.prior.weight > 0 && estimate.prior.up != Vec3f{};
   std::optional<LightEstimate> free_fit;
   auto free = [&]() -> const LightEstimate& {
@@ -355,7 +355,9 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   r.evidence = {};
   r.evidence.fit_confidence = r.light.confidence;
   r.evidence.shadow_accepted = r.shadow_ran && r.shadow.valid;
-  if (prior_on && r.light.valid && r.used == LightModel::kDistant && !temporal && free().valid) {
+  // Only when the shadow search made the prior-free fit anyway: no second fit for the evidence
+  // alone (OursFast runs no shadow search).
+  if (free_fit && free_fit->valid && r.light.valid && r.used == LightModel::kDistant) {
     const Vec3f& a = r.distant.dominant_direction;
     const Vec3f& b = free().dominant_direction;
     const float dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];

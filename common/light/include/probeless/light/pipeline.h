@@ -179,8 +179,8 @@ struct SceneEvidence {
   float fit_confidence = 0;  // the published model's fit: LightEstimate::confidence (R^2 x rows)
   bool shadow_accepted = false;  // cast shadows set the direction (RefineLightWithShadows valid)
   // Angle between the dominant directions of the distant fit with and without the light prior
-  // (degrees, [0, 180]): how far the prior had to move the data's answer; 0 without the prior
-  // (off, no up direction, the point model, the temporal fit).
+  // (degrees, [0, 180]): how far the prior had to move the data's answer. Computed when the shadow
+  // search ran from the prior-free fit (shadows_override_prior); else 0.
   float prior_shift_deg = 0;
 };
 
