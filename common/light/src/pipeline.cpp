@@ -88,9 +88,9 @@ void Validate(const ScenePipelineOptions& o) {
 std::vector<double> DefaultSceneConfidenceKnots(SceneGeometrySource source) {
   // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md).
   if (source == SceneGeometrySource::kDepthImage) {
-    return {0.002, 66.2, 0.225, 51.2, 0.412, 40.9, 0.838, 29.8};
+    return {0.002, 66.2, 0.225, 44.9, 0.408, 41.8, 0.846, 30.9};
   }
-  return {0.002, 61.8, 0.146, 44.3, 0.279, 35.2, 0.490, 30.7};
+  return {0.002, 61.8, 0.143, 44.3, 0.390, 35.5};
 }
 
 struct ScenePipeline::State {
