@@ -92,16 +92,20 @@ def fit(args):
     print(f"knots (after pooling): {{{text}}}")
 
 
+def confidence(error_deg):
+    """light::ConfidenceFromExpectedError: c = 1 / (1 + (e / 10 deg)^2)."""
+    return 1 / (1 + (error_deg / REFERENCE_DEG) ** 2)
+
+
 def calibrate(knots, raw):
     """light::ConfidenceCalibration::Apply: piecewise linear in the error, constant beyond."""
     pairs = list(zip(knots[0::2], knots[1::2]))
     if raw <= pairs[0][0]:
-        return REFERENCE_DEG ** 2 / (REFERENCE_DEG ** 2 + pairs[0][1] ** 2)
+        return confidence(pairs[0][1])
     for (r0, e0), (r1, e1) in zip(pairs, pairs[1:]):
         if raw <= r1:
-            e = e0 + (raw - r0) / (r1 - r0) * (e1 - e0)
-            return REFERENCE_DEG ** 2 / (REFERENCE_DEG ** 2 + e * e)
-    return REFERENCE_DEG ** 2 / (REFERENCE_DEG ** 2 + pairs[-1][1] ** 2)
+            return confidence(e0 + (raw - r0) / (r1 - r0) * (e1 - e0))
+    return confidence(pairs[-1][1])
 
 
 def check(args):

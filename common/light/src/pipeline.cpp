@@ -293,22 +293,19 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   // The light.
   const auto t_estimate = Clock::now();
   const double cpu_estimate = ThreadCpuMs();
-  // The fit without the prior (computed once, when a distant light with the prior needs it):
-  // the shadow search's seed (shadows_override_prior), and then the evidence's prior_shift_deg.
+  // With shadows_override_prior the shadow search starts from the fit without the prior, kept
+  // for the evidence's prior_shift_deg.
   const bool prior_on = estimate.prior.weight > 0 && estimate.prior.up != Vec3f{};
   std::optional<LightEstimate> free_fit;
-  auto free = [&]() -> const LightEstimate& {
-    if (!free_fit) {
-      EstimateOptions free_options = estimate;
-      free_options.prior.weight = 0;
-      free_fit = EstimateLight(s.transfer, f.grey, free_options, f.colour, weights);
-    }
-    return *free_fit;
-  };
   auto shadow_search = [&](LightEstimate* light) {
     const double cpu0 = ProcessCpuMs();
-    if (o.shadows_override_prior && prior_on && free().valid) {
-      LightEstimate seed = free();
+    if (o.shadows_override_prior && prior_on) {
+      EstimateOptions no_prior = estimate;
+      no_prior.prior.weight = 0;
+      free_fit = EstimateLight(s.transfer, f.grey, no_prior, f.colour, weights);
+    }
+    if (free_fit && free_fit->valid) {
+      LightEstimate seed = *free_fit;  // a copy: the evidence below reads the unrotated fit
       r.shadow =
           RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, &seed);
       if (r.shadow.valid) *light = std::move(seed);
@@ -355,11 +352,11 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   r.evidence = {};
   r.evidence.fit_confidence = r.light.confidence;
   r.evidence.shadow_accepted = r.shadow_ran && r.shadow.valid;
-  // Only when the shadow search made the prior-free fit anyway: no second fit for the evidence
-  // alone (OursFast runs no shadow search).
+  // Only when the shadow search made the prior-free fit: no fit for the evidence alone (OursFast
+  // runs no shadow search).
   if (free_fit && free_fit->valid && r.light.valid && r.used == LightModel::kDistant) {
     const Vec3f& a = r.distant.dominant_direction;
-    const Vec3f& b = free().dominant_direction;
+    const Vec3f& b = free_fit->dominant_direction;
     const float dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     r.evidence.prior_shift_deg =
         std::acos(std::clamp(dot, -1.0f, 1.0f)) * 180.0f / std::numbers::pi_v<float>;
