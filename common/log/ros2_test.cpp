@@ -180,6 +180,29 @@ TEST(ImageConversionTest, EveryEncodingRoundTripsWithItsRosName) {
   }
 }
 
+TEST(CompressedImageTest, LayoutAndSchema) {
+  m::Header header;
+  header.stamp_ns = 1'700'000'000'987'654'321;
+  header.SetFrameId("camera_optical");
+  const std::byte jpeg[] = {std::byte{0xff}, std::byte{0xd8}, std::byte{0xff}, std::byte{0xd9}};
+  CdrWriter out;
+  EncodeCompressedImage(header, "jpeg", jpeg, out);
+  CdrReader reader(out.data(), "check");
+  EXPECT_EQ(reader.Read<int32_t>("sec"), 1'700'000'000);
+  EXPECT_EQ(reader.Read<uint32_t>("nanosec"), 987'654'321u);
+  EXPECT_EQ(reader.String("frame_id"), "camera_optical");
+  EXPECT_EQ(reader.String("format"), "jpeg");
+  const auto data = reader.SequenceBytes<uint8_t>("data");
+  ASSERT_EQ(data.size(), sizeof(jpeg));
+  EXPECT_EQ(std::memcmp(data.data(), jpeg, sizeof(jpeg)), 0);
+  EXPECT_EQ(reader.remaining(), 0u);
+  // The same dependency texts as the Image schema.
+  const std::string image_schema(Ros2ConverterFor<m::Image>().schema_text());
+  const std::string& schema = CompressedImageSchemaText();
+  EXPECT_THAT(schema, ::testing::StartsWith("std_msgs/Header header\nstring format\nuint8[] data\n"));
+  EXPECT_EQ(schema.substr(schema.find("====")), image_schema.substr(image_schema.find("====")));
+}
+
 TEST(ImageConversionTest, DecodeErrors) {
   const Ros2Converter& converter = Ros2ConverterFor<m::Image>();
   auto image_cdr = [](const std::string& encoding, uint8_t big_endian, uint32_t step,

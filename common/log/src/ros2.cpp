@@ -1030,6 +1030,20 @@ const Ros2Converter& Ros2ConverterForType(std::string_view probeless_type) {
   return *converter;
 }
 
+const std::string& CompressedImageSchemaText() {
+  static const std::string text = ComposeSchema(
+      "std_msgs/Header header\nstring format\nuint8[] data\n", {kStdHeader, kTime});
+  return text;
+}
+
+void EncodeCompressedImage(const m::Header& header, std::string_view format,
+                           std::span<const std::byte> data, CdrWriter& out) {
+  out.Reserve(64 + format.size() + data.size());
+  WriteStdHeader(out, header, kRos2CompressedImageType);
+  out.String(format);
+  out.ByteSequence(data);
+}
+
 std::vector<std::byte> EncodeRos2(const Ros2Converter& converter,
                                   std::span<const std::byte> message) {
   CdrWriter writer;

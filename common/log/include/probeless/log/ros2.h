@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "probeless/log/cdr.h"
+#include "probeless/msgs/header.h"
 
 namespace probeless::log {
 
@@ -103,6 +104,16 @@ template <class M>
 const Ros2Converter& Ros2ConverterFor() {
   return Ros2ConverterForType(M::kTypeName);
 }
+
+// sensor_msgs/msg/CompressedImage, which has no probeless message type: made from an Image by
+// whoever compresses it (the foxglove bridge's JPEG channels). Its ROS 2 type name, its ros2msg
+// schema (in the format of Ros2Converter::schema_text), and its CDR: `header` as std_msgs/Header
+// (as the converters write it), then `format` ("jpeg") and the compressed bytes. Throws CdrError
+// if the stamp is outside builtin_interfaces/Time's range.
+inline constexpr std::string_view kRos2CompressedImageType = "sensor_msgs/msg/CompressedImage";
+const std::string& CompressedImageSchemaText();
+void EncodeCompressedImage(const msgs::Header& header, std::string_view format,
+                           std::span<const std::byte> data, CdrWriter& out);
 
 // Convenience: the CDR bytes of `message`.
 std::vector<std::byte> EncodeRos2(const Ros2Converter& converter,
