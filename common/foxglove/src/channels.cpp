@@ -79,9 +79,9 @@ ChannelChanges ChannelTable::Update(std::span<const BusTopic> topics) {
   for (const BusTopic& t : topics) bus_names.insert(t.topic);
   // The channels that should exist now, by key.
   std::map<std::string, ChannelEntry> wanted;
-  auto warn = [&](const BusTopic& t, const std::string& line) {
+  auto warn = [&](const BusTopic& t, const std::string& line, bool notice = false) {
     auto [it, inserted] = warned_.try_emplace(t.topic + "|" + line, t.type);
-    if (inserted) changes.warnings.push_back(line);
+    if (inserted) (notice ? changes.notices : changes.warnings).push_back(line);
   };
   for (const BusTopic& t : topics) {
     if (t.type.empty()) continue;  // a topic being created
@@ -91,7 +91,7 @@ ChannelChanges ChannelTable::Update(std::span<const BusTopic> topics) {
     if (!selected && !jpeg) continue;
     const log::Ros2Converter* converter = log::FindRos2ConverterByProbelessType(t.type);
     if (converter == nullptr) {
-      warn(t, t.topic + ": type " + t.type + " has no ROS 2 conversion; not advertised");
+      warn(t, t.topic + ": type " + t.type + " has no ROS 2 conversion; not advertised", true);
       continue;
     }
     if (converter->layout_hash() != t.layout_hash) {

@@ -80,6 +80,7 @@ struct Server::Impl {
       list.push_back({s.topic, s.type.name, s.type.layout_hash});
     }
     const ChannelChanges changes = hub->UpdateTopics(list);
+    for (const std::string& n : changes.notices) Log(n);
     for (const std::string& w : changes.warnings) Log("warning: " + w);
     for (const Channel& c : changes.added) {
       Log("advertising " + c.topic + " (" + c.schema_name + ", " + c.encoding + ") as channel " +

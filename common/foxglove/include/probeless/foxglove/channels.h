@@ -76,9 +76,12 @@ struct ChannelEntry {
 struct ChannelChanges {
   std::vector<Channel> added;
   std::vector<uint32_t> removed;
-  // One line per selected topic newly seen that cannot be advertised (no conversion, layout hash
-  // of another build, a JPEG channel on a non-image type), e.g.
-  // "/x: type probeless_msgs/Ack has no ROS 2 conversion; not advertised".
+  // One line per selected topic newly seen whose type has no ROS 2 conversion (routine: /clock,
+  // player control), e.g. "/clock: type probeless_msgs/Header has no ROS 2 conversion; not
+  // advertised".
+  std::vector<std::string> notices;
+  // One line per selected topic newly seen that cannot be advertised for another reason (layout
+  // hash of another build, a JPEG channel on a non-image type or on a name taken).
   std::vector<std::string> warnings;
 };
 
