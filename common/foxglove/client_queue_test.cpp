@@ -52,6 +52,19 @@ TEST(ClientQueueTest, DropsOldestByCountAndBytes) {
   EXPECT_EQ(q.dropped(), 4u);
 }
 
+TEST(ClientQueueTest, TheCountBoundIsPerSubscription) {
+  ClientQueue q({.max_messages = 2});
+  for (uint64_t i = 0; i < 6; ++i) q.PushData(1, Message(7, 100, i));  // a fast stream
+  q.PushData(2, Message(8, 1, 100));                                   // a slow one
+  q.PushData(1, Message(7, 100, 6));
+  EXPECT_EQ(q.queued_messages(), 3u);
+  EXPECT_EQ(q.dropped_by_channel().at(7), 5u);
+  EXPECT_FALSE(q.dropped_by_channel().contains(8));
+  EXPECT_EQ(q.Pop()->message->receive_ns, 5u);
+  EXPECT_EQ(q.Pop()->message->receive_ns, 100u);  // the slow stream's message survived
+  EXPECT_EQ(q.Pop()->message->receive_ns, 6u);
+}
+
 TEST(ClientQueueTest, UnsubscribeRemovesWithoutCounting) {
   ClientQueue q({.max_messages = 8});
   q.PushData(1, Message(7, 10, 1));

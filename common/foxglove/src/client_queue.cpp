@@ -28,15 +28,25 @@ size_t ClientQueue::PushData(uint32_t subscription_id,
   std::lock_guard lock(mutex_);
   const size_t bytes = message->payload.size();
   size_t dropped = 0;
-  while (!data_.empty() &&
-         (data_.size() + 1 > limits_.max_messages || data_bytes_ + bytes > limits_.max_bytes)) {
-    data_bytes_ -= data_.front().message->payload.size();
-    ++dropped_by_channel_[data_.front().message->channel_id];
-    data_.pop_front();
+  auto drop = [&](std::deque<Data>::iterator it) {
+    data_bytes_ -= it->message->payload.size();
+    ++dropped_by_channel_[it->message->channel_id];
+    --queued_by_subscription_[it->subscription_id];
     ++dropped;
+    return data_.erase(it);
+  };
+  if (queued_by_subscription_[subscription_id] >= limits_.max_messages) {
+    for (auto it = data_.begin(); it != data_.end(); ++it) {
+      if (it->subscription_id == subscription_id) {
+        drop(it);
+        break;
+      }
+    }
   }
+  while (!data_.empty() && data_bytes_ + bytes > limits_.max_bytes) drop(data_.begin());
   dropped_ += dropped;
   data_bytes_ += bytes;
+  ++queued_by_subscription_[subscription_id];
   data_.push_back({subscription_id, std::move(message)});
   return dropped;
 }
@@ -46,6 +56,7 @@ void ClientQueue::RemoveSubscription(uint32_t subscription_id) {
   for (auto it = data_.begin(); it != data_.end();) {
     if (it->subscription_id == subscription_id) {
       data_bytes_ -= it->message->payload.size();
+      --queued_by_subscription_[subscription_id];
       it = data_.erase(it);
     } else {
       ++it;
@@ -66,6 +77,7 @@ std::optional<OutgoingFrame> ClientQueue::Pop() {
   f.subscription_id = data_.front().subscription_id;
   f.message = std::move(data_.front().message);
   data_bytes_ -= f.message->payload.size();
+  --queued_by_subscription_[f.subscription_id];
   data_.pop_front();
   ++sent_;
   return f;

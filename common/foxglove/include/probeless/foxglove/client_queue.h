@@ -3,9 +3,11 @@
 // Two lanes: control (JSON text: serverInfo, advertise, status, parameterValues, and time
 // frames), sent first and never dropped but bounded — a client that leaves more than
 // max_control of them unread is not reading at all and is to be disconnected (Overflowed()); and
-// data (messageData frames), bounded by a message count and a byte budget, dropping its oldest
-// entries when full. Drops are counted per channel. A data payload is shared by every client
-// that gets it (encoded once, referenced here).
+// data (messageData frames, in arrival order), bounded per subscription by a message count (a
+// fast image stream never pushes a slow light stream out) and for the whole client by a byte
+// budget, dropping the oldest entries: of the same subscription when its count is reached, of
+// any subscription when the bytes are. Drops are counted per channel. A data payload is shared
+// by every client that gets it (encoded once, referenced here).
 //
 // Thread safety: every member may be called from any thread (one mutex).
 #pragma once
@@ -52,9 +54,9 @@ class ClientQueue {
   // Appends a control frame (text or binary). Beyond max_control queued, nothing is added and
   // Overflowed() turns true.
   void PushControl(std::string bytes, bool binary);
-  // Appends a messageData entry; drops the oldest data entries while more than max_messages are
-  // queued or their bytes exceed max_bytes (the new one is always kept). Returns how many were
-  // dropped.
+  // Appends a messageData entry; drops the oldest entry of the same subscription while it has
+  // max_messages queued, then the oldest entries while the bytes would exceed max_bytes (the new
+  // one is always kept). Returns how many were dropped.
   size_t PushData(uint32_t subscription_id, std::shared_ptr<const EncodedMessage> message);
   // Removes the queued data of one subscription (an unsubscribe: not counted as drops).
   void RemoveSubscription(uint32_t subscription_id);
@@ -65,7 +67,7 @@ class ClientQueue {
   // Data entries dropped so far, in total and per channel id.
   uint64_t dropped() const;
   std::map<uint32_t, uint64_t> dropped_by_channel() const;
-  // Data entries sent (popped) so far.
+  // Data entries sent (popped) so far. queued_messages: data entries queued, all subscriptions.
   uint64_t sent() const;
   size_t queued_messages() const;
   size_t queued_bytes() const;
@@ -79,6 +81,7 @@ class ClientQueue {
   mutable std::mutex mutex_;
   std::deque<OutgoingFrame> control_;
   std::deque<Data> data_;
+  std::map<uint32_t, size_t> queued_by_subscription_;
   size_t data_bytes_ = 0;
   bool overflowed_ = false;
   uint64_t dropped_ = 0;
