@@ -71,7 +71,8 @@ std::chrono::nanoseconds TimeoutOf(const std::optional<double>& seconds) {
 }
 
 PySample Wrap(bus::Sample sample, SubscriberState& state) {
-  auto storage = std::make_shared<SampleStorage>(std::move(sample), state.Get().topic(), state.mutex);
+  auto storage =
+      std::make_shared<SampleStorage>(std::move(sample), state.Get().topic(), state.mutex);
   // The size and alignment checks of the type (MessageError) before anything reads it.
   state.type->wrap(storage);
   return PySample{std::move(storage), state.type};
@@ -190,8 +191,9 @@ std::string ParamTypeName(py::handle type) {
   if (type.is(py::type::of(py::int_()))) return "integer";
   if (type.is(py::type::of(py::float_()))) return "double";
   if (type.is(py::type::of(py::str()))) return "string";
-  throw py::type_error("probeless: parameter type must be bool, int, float, str or one of "
-                       "'double_array', 'integer_array', 'string_array'");
+  throw py::type_error(
+      "probeless: parameter type must be bool, int, float, str or one of "
+      "'double_array', 'integer_array', 'string_array'");
 }
 
 // The type of a default value: bool, int, float, str or a list of one of them.
@@ -221,9 +223,10 @@ std::string ParamTypeOfValue(py::handle value) {
     if (all_number) return "double_array";
     if (all_str) return "string_array";
   }
-  throw py::type_error("probeless: parameter default must be bool, int, float, str or a list of "
-                       "numbers or strings, got " +
-                       py::repr(value).cast<std::string>());
+  throw py::type_error(
+      "probeless: parameter default must be bool, int, float, str or a list of "
+      "numbers or strings, got " +
+      py::repr(value).cast<std::string>());
 }
 
 py::object Param(node::Node& node, const std::string& name, py::handle default_value,
@@ -318,8 +321,7 @@ void BindBus(py::module_& m) {
       .def_property_readonly(
           "info", [](const PySample& s) { return s.storage->info(); }, "bus metadata")
       .def_property_readonly("topic", [](const PySample& s) { return s.storage->topic(); })
-      .def_property_readonly("released",
-                             [](const PySample& s) { return s.storage->released(); })
+      .def_property_readonly("released", [](const PySample& s) { return s.storage->released(); })
       .def(
           "release", [](const PySample& s) { s.storage->Release(); },
           "Returns the slot to the publisher now. Raises BufferError while numpy views of it "
@@ -440,12 +442,15 @@ void BindBus(py::module_& m) {
           py::arg("loan_or_message"),
           "Publishes a loan of this publisher (zero copy) or a copy of a message of its type; "
           "returns the sequence number. TypeError for another type.")
-      .def_property_readonly("subscriber_count",
-                             [](const PyPublisher& p) { return p.Get().publisher.SubscriberCount(); })
-      .def_property_readonly("topic", [](const PyPublisher& p) { return p.Get().publisher.topic(); })
+      .def_property_readonly(
+          "subscriber_count",
+          [](const PyPublisher& p) { return p.Get().publisher.SubscriberCount(); })
+      .def_property_readonly("topic",
+                             [](const PyPublisher& p) { return p.Get().publisher.topic(); })
       .def_property_readonly("msg_type", [](const PyPublisher& p) { return p.type->cls; })
       .def_property_readonly(
-          "max_message_bytes", [](const PyPublisher& p) { return p.Get().publisher.max_message_bytes(); })
+          "max_message_bytes",
+          [](const PyPublisher& p) { return p.Get().publisher.max_message_bytes(); })
       .def(
           "close", [](PyPublisher& p) { p.closed = true; },
           "Stops using the publisher; it leaves the topic once its loans are gone.")
@@ -492,9 +497,11 @@ void BindBus(py::module_& m) {
             return Wrap(std::move(*sample), *s.state);
           },
           "The oldest queued sample or None, without waiting.")
-      .def_property_readonly("dropped", [](const PySubscriber& s) { return s.state->Get().dropped(); },
-                             "messages lost to drop-oldest so far")
-      .def_property_readonly("queued", [](const PySubscriber& s) { return s.state->Get().queued(); })
+      .def_property_readonly(
+          "dropped", [](const PySubscriber& s) { return s.state->Get().dropped(); },
+          "messages lost to drop-oldest so far")
+      .def_property_readonly("queued",
+                             [](const PySubscriber& s) { return s.state->Get().queued(); })
       .def_property_readonly("publisher_count",
                              [](const PySubscriber& s) { return s.state->Get().PublisherCount(); })
       .def_property_readonly("topic", [](const PySubscriber& s) { return s.state->Get().topic(); })
@@ -514,8 +521,9 @@ void BindBus(py::module_& m) {
       });
 
   m.def("current_domain", &bus::CurrentDomain, "$PROBELESS_DOMAIN, or '0'.");
-  m.def("validate_topic_name", [](const std::string& t) { bus::ValidateTopicName(t); },
-        py::arg("topic"), "Raises BusError unless `topic` is a valid absolute topic name.");
+  m.def(
+      "validate_topic_name", [](const std::string& t) { bus::ValidateTopicName(t); },
+      py::arg("topic"), "Raises BusError unless `topic` is a valid absolute topic name.");
   m.def("list_topics", &ListTopics, py::arg("domain") = bus::CurrentDomain(),
         "Every topic of this user in `domain` with its publishers and subscribers (dicts), read "
         "without joining them.");
@@ -578,8 +586,9 @@ void BindNode(py::module_& m) {
       .def_property_readonly("fully_qualified_name",
                              [](const PyNode& n) { return n.Get().fully_qualified_name(); })
       .def_property_readonly("program", [](const PyNode& n) { return n.Get().program(); })
-      .def_property_readonly("args", [](const PyNode& n) { return n.Get().args(); },
-                             "the node's own arguments (not the ROS ones)")
+      .def_property_readonly(
+          "args", [](const PyNode& n) { return n.Get().args(); },
+          "the node's own arguments (not the ROS ones)")
       .def(
           "param",
           [](PyNode& n, const std::string& name, py::object default_value,
@@ -600,8 +609,7 @@ void BindNode(py::module_& m) {
       .def("has_param_override",
            [](const PyNode& n, const std::string& name) { return n.Get().HasParamOverride(name); })
       .def("declared_params", [](const PyNode& n) { return n.Get().DeclaredParams(); })
-      .def("unused_param_overrides",
-           [](const PyNode& n) { return n.Get().UnusedParamOverrides(); })
+      .def("unused_param_overrides", [](const PyNode& n) { return n.Get().UnusedParamOverrides(); })
       .def(
           "resolve_topic_name",
           [](const PyNode& n, const std::string& name) { return n.Get().ResolveTopicName(name); },
@@ -684,10 +692,14 @@ void BindNode(py::module_& m) {
           },
           py::arg("level"), py::arg("message"),
           "Writes '[level] [fqn] message' to stderr if the level is enabled.")
-      .def("debug", [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kDebug, s); })
-      .def("info", [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kInfo, s); })
-      .def("warn", [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kWarn, s); })
-      .def("error", [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kError, s); })
+      .def("debug",
+           [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kDebug, s); })
+      .def("info",
+           [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kInfo, s); })
+      .def("warn",
+           [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kWarn, s); })
+      .def("error",
+           [](const PyNode& n, const std::string& s) { n.Get().Log(node::LogLevel::kError, s); })
       .def("ok", [](const PyNode&) { return node::ok(); });
 }
 

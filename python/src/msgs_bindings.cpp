@@ -151,9 +151,10 @@ const MessageType& MessageTypeOf(py::handle cls_or_name) {
   for (const auto& [name, type] : Registry()) {
     if (cls_or_name.is(type.cls)) return type;
   }
-  throw py::type_error("probeless: expected a message class of probeless.msgs (e.g. "
-                       "probeless.msgs.Image), got " +
-                       py::repr(cls_or_name).cast<std::string>());
+  throw py::type_error(
+      "probeless: expected a message class of probeless.msgs (e.g. "
+      "probeless.msgs.Image), got " +
+      py::repr(cls_or_name).cast<std::string>());
 }
 
 AnyMsg AnyMsgOf(py::handle message) {
@@ -203,8 +204,8 @@ const EnumTable kEncodings{"encoding",
                             {5, "depth16"},
                             {6, "float32"},
                             {7, "rgb32f"}}};
-const EnumTable kDistortionModels{
-    "distortion_model", {{0, "none"}, {1, "plumb_bob"}, {2, "rational_polynomial"}}};
+const EnumTable kDistortionModels{"distortion_model",
+                                  {{0, "none"}, {1, "plumb_bob"}, {2, "rational_polynomial"}}};
 const EnumTable kShLightUnits{
     "units", {{0, "unknown"}, {1, "linear"}, {2, "face_model"}, {3, "linear_unscaled"}}};
 const EnumTable kTransferLayouts{"layout", {{0, "invalid"}, {1, "interleaved_float32"}}};
@@ -230,7 +231,7 @@ struct MemberOf<T C::*> {
 
 template <class T>
 constexpr bool kIsNumericArray =
-    std::is_array_v<T> && std::is_arithmetic_v<std::remove_all_extents_t<T>> &&
+    std::is_array_v<T>&& std::is_arithmetic_v<std::remove_all_extents_t<T>> &&
     !std::is_same_v<std::remove_all_extents_t<T>, char>;
 
 template <class T>
@@ -260,8 +261,7 @@ class Binder {
  public:
   Binder(py::module_& m, const char* name, const char* doc) : cls_(m, name, doc) {
     cls_.def(py::init([](py::kwargs fields) {
-               auto storage =
-                   std::make_shared<OwnedStorage>(std::string(M::kTypeName), sizeof(M));
+               auto storage = std::make_shared<OwnedStorage>(std::string(M::kTypeName), sizeof(M));
                ::new (static_cast<void*>(storage->data())) M{};
                MsgRef<M> ref{storage, 0, true};
                py::object self = py::cast(ref);
@@ -280,7 +280,8 @@ class Binder {
     cls_.attr("struct_bytes") = sizeof(M);
     cls_.attr("has_payload") = M::kHasPayload;
     cls_.def_property_readonly(
-        "writable", [](const MsgRef<M>& r) { return r.storage->writable() && !r.storage->released(); },
+        "writable",
+        [](const MsgRef<M>& r) { return r.storage->writable() && !r.storage->released(); },
         "False for a received sample (read-only) and once released.");
     cls_.def(
         "copy",
@@ -308,8 +309,8 @@ class Binder {
           "payload",
           [](const MsgRef<M>& r) {
             const std::span<std::byte> p = r.payload();
-            return Storage::View<uint8_t>(r.storage, p.data(),
-                                          {static_cast<py::ssize_t>(p.size())}, {1});
+            return Storage::View<uint8_t>(r.storage, p.data(), {static_cast<py::ssize_t>(p.size())},
+                                          {1});
           },
           "The bytes after the struct (pixels, planes) as a uint8 view.");
     }
@@ -429,7 +430,10 @@ class Binder {
     using E = typename MemberOf<decltype(Member)>::Type;
     fields_.push_back(name);
     cls_.def_property(
-        name, [&table](const MsgRef<M>& r) { return table.Name(static_cast<uint32_t>(r.get()->*Member)); },
+        name,
+        [&table](const MsgRef<M>& r) {
+          return table.Name(static_cast<uint32_t>(r.get()->*Member));
+        },
         [&table](const MsgRef<M>& r, py::object value) {
           r.mut()->*Member = static_cast<E>(table.Value(value));
         },
@@ -448,8 +452,8 @@ class Binder {
 // A whole message with `payload_bytes` after the struct, owned by Python, made by `init`.
 template <class M, class Init>
 MsgRef<M> CreateOwned(size_t payload_bytes, Init&& init) {
-  auto storage = std::make_shared<OwnedStorage>(std::string(M::kTypeName),
-                                                sizeof(M) + payload_bytes);
+  auto storage =
+      std::make_shared<OwnedStorage>(std::string(M::kTypeName), sizeof(M) + payload_bytes);
   M* message = ::new (static_cast<void*>(storage->data())) M{};
   init(*message);
   return MsgRef<M>{storage, 0, true};
@@ -457,8 +461,11 @@ MsgRef<M> CreateOwned(size_t payload_bytes, Init&& init) {
 
 void BindHeaderAndGeometry(py::module_& m) {
   Binder<msgs::Header> header(m, "Header", "Stamp, sequence and frame of a message's data.");
-  header.Scalar<&msgs::Header::stamp_ns>("stamp_ns", "acquisition time, ns since the epoch (CLOCK_REALTIME)")
-      .Scalar<&msgs::Header::stamp_mono_ns>("stamp_mono_ns", "the same instant on CLOCK_MONOTONIC, ns")
+  header
+      .Scalar<&msgs::Header::stamp_ns>("stamp_ns",
+                                       "acquisition time, ns since the epoch (CLOCK_REALTIME)")
+      .Scalar<&msgs::Header::stamp_mono_ns>("stamp_mono_ns",
+                                            "the same instant on CLOCK_MONOTONIC, ns")
       .Scalar<&msgs::Header::sequence>("sequence", "producer's frame counter from 1; 0 = unset")
       .String<&msgs::Header::frame_id>("frame_id", "coordinate frame, at most 31 characters")
       .Finish();
@@ -467,15 +474,21 @@ void BindHeaderAndGeometry(py::module_& m) {
       "Sets both stamps to now (CLOCK_REALTIME and CLOCK_MONOTONIC).");
 
   Binder<msgs::Vector3> vector3(m, "Vector3", "A 3-vector (metres for positions).");
-  vector3.Scalar<&msgs::Vector3::x>("x", "").Scalar<&msgs::Vector3::y>("y", "")
-      .Scalar<&msgs::Vector3::z>("z", "").Finish();
+  vector3.Scalar<&msgs::Vector3::x>("x", "")
+      .Scalar<&msgs::Vector3::y>("y", "")
+      .Scalar<&msgs::Vector3::z>("z", "")
+      .Finish();
   Binder<msgs::Quaternion> quaternion(m, "Quaternion",
                                       "Unit quaternion w + xi + yj + zk; (0, 0, 0, 0) = unset.");
-  quaternion.Scalar<&msgs::Quaternion::w>("w", "").Scalar<&msgs::Quaternion::x>("x", "")
-      .Scalar<&msgs::Quaternion::y>("y", "").Scalar<&msgs::Quaternion::z>("z", "").Finish();
+  quaternion.Scalar<&msgs::Quaternion::w>("w", "")
+      .Scalar<&msgs::Quaternion::x>("x", "")
+      .Scalar<&msgs::Quaternion::y>("y", "")
+      .Scalar<&msgs::Quaternion::z>("z", "")
+      .Finish();
   Binder<msgs::RigidTransform> transform(
       m, "RigidTransform", "Child -> parent: p_parent = R(rotation) p_child + translation.");
-  transform.Struct<&msgs::RigidTransform::translation>("translation", "child origin in the parent, m")
+  transform
+      .Struct<&msgs::RigidTransform::translation>("translation", "child origin in the parent, m")
       .Struct<&msgs::RigidTransform::rotation>("rotation", "child axes into parent axes")
       .Finish();
   transform.cls().def(
@@ -610,10 +623,11 @@ void BindLight(py::module_& m) {
       "sample_valid_mask",
       [](const MsgRef<msgs::FaceObservation>& r) {
         const msgs::FaceObservation& f = *r.get();
-        py::array_t<bool> mask(static_cast<py::ssize_t>(std::min(f.sample_count,
-                                                                 msgs::kMaxFaceSamples)));
+        py::array_t<bool> mask(
+            static_cast<py::ssize_t>(std::min(f.sample_count, msgs::kMaxFaceSamples)));
         auto out = mask.mutable_unchecked<1>();
-        for (py::ssize_t i = 0; i < out.shape(0); ++i) out(i) = f.SampleValid(static_cast<uint32_t>(i));
+        for (py::ssize_t i = 0; i < out.shape(0); ++i)
+          out(i) = f.SampleValid(static_cast<uint32_t>(i));
         return mask;
       },
       "A bool array (a copy) of the first sample_count validity bits.");
@@ -675,9 +689,8 @@ void BindBuffers(py::module_& m) {
   g.def_static(
       "create",
       [](uint32_t w, uint32_t h) {
-        return CreateOwned<msgs::GeometryBuffer>(
-            msgs::GeometryBuffer::StandardPayloadBytes(w, h),
-            [&](msgs::GeometryBuffer& b) { b.Init(w, h); });
+        return CreateOwned<msgs::GeometryBuffer>(msgs::GeometryBuffer::StandardPayloadBytes(w, h),
+                                                 [&](msgs::GeometryBuffer& b) { b.Init(w, h); });
       },
       py::arg("width"), py::arg("height"));
   g.def_static("message_bytes_for", &msgs::GeometryBuffer::MessageBytesFor, py::arg("width"),
@@ -740,8 +753,8 @@ void BindBuffers(py::module_& m) {
         py::list out;
         for (uint32_t i = 0; i < msgs::kMaxAuxiliaryViews; ++i) {
           out.append(MsgRef<msgs::AuxiliaryView>{
-              r.storage, r.offset + offsetof(msgs::AuxiliaryViews, views) +
-                             i * sizeof(msgs::AuxiliaryView),
+              r.storage,
+              r.offset + offsetof(msgs::AuxiliaryViews, views) + i * sizeof(msgs::AuxiliaryView),
               false});
         }
         return py::tuple(out);

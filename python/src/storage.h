@@ -101,7 +101,8 @@ class OwnedStorage : public Storage {
 class SampleStorage : public Storage {
  public:
   // `subscriber_mutex` serialises the release with the subscriber's own calls.
-  SampleStorage(bus::Sample sample, std::string topic, std::shared_ptr<std::mutex> subscriber_mutex);
+  SampleStorage(bus::Sample sample, std::string topic,
+                std::shared_ptr<std::mutex> subscriber_mutex);
   ~SampleStorage() override;
   const bus::MessageInfo& info() const { return info_; }
   const std::string& topic() const { return topic_; }

@@ -63,8 +63,7 @@ struct PyCursor {
     if (decode && converter != nullptr && view.channel->message_encoding == "cdr") {
       const MessageType* type = FindMessageType(std::string(converter->probeless_type()));
       if (type != nullptr) {
-        log::MessageBuffer buffer =
-            log::DecodeRos2(*converter, view.data, view.channel->metadata);
+        log::MessageBuffer buffer = log::DecodeRos2(*converter, view.data, view.channel->metadata);
         auto storage = std::make_shared<OwnedStorage>(type->name + " from " + reader->path(),
                                                       std::move(buffer));
         out.msg = type->wrap(std::move(storage));
@@ -106,14 +105,14 @@ void BindLogModule(py::module_& m) {
       .def_property_readonly("library", &log::McapReader::library)
       .def_property_readonly("truncated", &log::McapReader::truncated,
                              "no valid footer: the messages were recovered by a scan")
-      .def_property_readonly(
-          "message_count",
-          [](const log::McapReader& r) { return r.statistics().message_count; })
+      .def_property_readonly("message_count",
+                             [](const log::McapReader& r) { return r.statistics().message_count; })
       .def_property_readonly(
           "start_time_ns",
           [](const log::McapReader& r) { return r.statistics().message_start_time_ns; })
       .def_property_readonly(
-          "end_time_ns", [](const log::McapReader& r) { return r.statistics().message_end_time_ns; })
+          "end_time_ns",
+          [](const log::McapReader& r) { return r.statistics().message_end_time_ns; })
       .def(
           "topics",
           [](const log::McapReader& r) {
@@ -233,8 +232,8 @@ void BindFaceLight(py::module_& m) {
                        std::array<double, 3> skin_albedo, double unit_scale) {
              PyFaceLight self;
              self.model_path = ResolveData(model);
-             self.model =
-                 std::make_unique<face_light::FaceLightModel>(face_light::LoadModel(self.model_path));
+             self.model = std::make_unique<face_light::FaceLightModel>(
+                 face_light::LoadModel(self.model_path));
              face_light::EstimatorOptions eo;
              eo.back_prior = back_prior;
              eo.ridge = ridge;
@@ -261,8 +260,8 @@ void BindFaceLight(py::module_& m) {
       .def_property_readonly("model_path", [](const PyFaceLight& f) { return f.model_path; })
       .def(
           "estimate_rgb",
-          [](const PyFaceLight& f, py::array_t<float, py::array::c_style | py::array::forcecast> rgb,
-             py::object valid) {
+          [](const PyFaceLight& f,
+             py::array_t<float, py::array::c_style | py::array::forcecast> rgb, py::object valid) {
             const size_t n = static_cast<size_t>(f.estimator->SampleCount());
             const std::vector<uint64_t> bits = ValidBits(valid, n);
             face_light::LightEstimate e;
@@ -297,10 +296,10 @@ void BindFaceLight(py::module_& m) {
             const msgs::FaceObservation& obs = *observation.get();
             obs.Validate();
             if (static_cast<int>(obs.sample_count) != f.estimator->SampleCount()) {
-              throw face_light::FaceLightError(
-                  "face_light: observation has " + std::to_string(obs.sample_count) +
-                  " samples but model '" + f.model_path + "' has " +
-                  std::to_string(f.estimator->SampleCount()));
+              throw face_light::FaceLightError("face_light: observation has " +
+                                               std::to_string(obs.sample_count) +
+                                               " samples but model '" + f.model_path + "' has " +
+                                               std::to_string(f.estimator->SampleCount()));
             }
             return EstimateDict(f.estimator->EstimateRgb(
                 {&obs.sample_rgb[0][0], obs.sample_count * size_t{3}}, obs.sample_valid));
@@ -309,16 +308,16 @@ void BindFaceLight(py::module_& m) {
           "estimate_rgb on a msgs.FaceObservation's samples and validity (face frame).")
       .def(
           "linear_light",
-          [](const PyFaceLight& f, py::array_t<float, py::array::c_style | py::array::forcecast> rgb,
-             py::object valid, const py::dict& estimate) {
+          [](const PyFaceLight& f,
+             py::array_t<float, py::array::c_style | py::array::forcecast> rgb, py::object valid,
+             const py::dict& estimate) {
             const std::vector<uint64_t> bits =
                 ValidBits(valid, static_cast<size_t>(f.estimator->SampleCount()));
             const face_light::LinearLight l = f.converter->Convert(
                 {rgb.data(), static_cast<size_t>(rgb.size())}, bits, EstimateFromDict(estimate));
             py::dict d;
             py::array_t<float> coefficients({face_light::kRtfCoefficients, 3});
-            std::memcpy(coefficients.mutable_data(), l.coefficients.data(),
-                        sizeof(l.coefficients));
+            std::memcpy(coefficients.mutable_data(), l.coefficients.data(), sizeof(l.coefficients));
             d["valid"] = l.valid;
             d["coefficients"] = coefficients;
             d["direction"] = l.direction;
@@ -467,7 +466,8 @@ void BindSceneLight(py::module_& m) {
             frame.stamp_ns = stamp_ns;
             frame.width = static_cast<int>(w);
             frame.height = static_cast<int>(h);
-            frame.intrinsics = light::IntrinsicsFrom(info, static_cast<int>(w), static_cast<int>(h));
+            frame.intrinsics =
+                light::IntrinsicsFrom(info, static_cast<int>(w), static_cast<int>(h));
             frame.grey = grey;
             frame.colour = rgb;
             if (!depth.is_none()) {
@@ -475,10 +475,12 @@ void BindSceneLight(py::module_& m) {
               msgs::Image im;
               const bool mm = d.dtype().is(py::dtype::of<uint16_t>());
               const py::array packed =
-                  mm ? py::array(py::array_t<uint16_t, py::array::c_style | py::array::forcecast>(d))
+                  mm ? py::array(
+                           py::array_t<uint16_t, py::array::c_style | py::array::forcecast>(d))
                      : py::array(py::array_t<float, py::array::c_style | py::array::forcecast>(d));
               if (packed.ndim() != 2) throw py::value_error("probeless: depth must be H x W");
-              im.Init(static_cast<uint32_t>(packed.shape(1)), static_cast<uint32_t>(packed.shape(0)),
+              im.Init(static_cast<uint32_t>(packed.shape(1)),
+                      static_cast<uint32_t>(packed.shape(0)),
                       mm ? msgs::Encoding::kDepth16 : msgs::Encoding::kFloat32);
               if (mm && info.depth_scale == 0) info.depth_scale = 0.001;
               light::DepthFromImage(im,
@@ -512,8 +514,8 @@ void BindSceneLight(py::module_& m) {
             py::dict out;
             out["valid"] = r->light.valid;
             out["model"] = r->used == light::LightModel::kPoint ? "point" : "distant";
-            auto storage = std::make_shared<OwnedStorage>("probeless_msgs/ShLight",
-                                                          sizeof(msgs::ShLight));
+            auto storage =
+                std::make_shared<OwnedStorage>("probeless_msgs/ShLight", sizeof(msgs::ShLight));
             auto* sh = ::new (static_cast<void*>(storage->data())) msgs::ShLight{};
             if (r->light.valid) {
               // As the node publishes it: the white light times the illuminant colour.
