@@ -27,11 +27,17 @@
 // scene_light publishes in the camera frame of a G_r, turns its dominant direction into the world
 // with the pose of that G_r's stamp and adds the light view to every later frame's views). Reset:
 // publish any probeless_msgs/Header on ~/reset (/fusion/reset). fail_on_lost_ratio (-1 = off):
-// exit 3 at shutdown when lost / frames exceeds it (0: any lost frame).
+// exit 3 at shutdown when lost / frames exceeds it (0: any lost frame). checkpoint ("" = off, or
+// a file path): the map survives a restart - at start-up a checkpoint found there is resumed (the
+// first frame relocalises against it; a file that is not a valid checkpoint for these volume
+// params is a bad param, exit 2), every checkpoint_frames (30) integrated frames and at shutdown
+// the map is written there atomically (recon/checkpoint.h, on a thread of its own), and a reset
+// removes it.
 //
 // A frame is processed when its depth and its image (same header.stamp_ns) have both arrived, or
 // on the depth alone when no image with that stamp comes before the next depth. Exit: 0 on
-// SIGINT/SIGTERM, 3 then when fail_on_lost_ratio is exceeded, 2 on bad params, 1 otherwise.
+// SIGINT/SIGTERM, 3 then when fail_on_lost_ratio is exceeded, 2 on bad params (and a bad
+// checkpoint), 1 otherwise (also when the checkpoint at shutdown cannot be written).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -42,6 +48,7 @@
 
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
+#include "probeless/recon/checkpoint.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
 
@@ -125,7 +132,40 @@ int Run(int argc, char** argv) {
     throw node::NodeError("fusion: param aux_pixels must be in 1..4096, got " +
                           std::to_string(aux_pixels));
   }
+  const std::string checkpoint_path = node.Param("checkpoint", "");
+  const int checkpoint_frames = node.Param("checkpoint_frames", 30);
+  if (checkpoint_frames < 1) {
+    throw node::NodeError("fusion: param checkpoint_frames must be >= 1, got " +
+                          std::to_string(checkpoint_frames));
+  }
   recon::FusionPipeline pipeline(options);
+  std::optional<recon::CheckpointWriter> checkpoint;
+  if (!checkpoint_path.empty()) {
+    if (const auto bytes = recon::ReadFileIfExists(checkpoint_path)) {
+      pipeline.Resume(*bytes, "checkpoint '" + checkpoint_path + "'");
+      node.Info() << "resumed the map from " << checkpoint_path << " ("
+                  << pipeline.volume().ObservedBricks()
+                  << " bricks); the first frame relocalises against it";
+    }
+    checkpoint.emplace(checkpoint_path);
+  }
+  int integrated_since_checkpoint = 0;
+  // Hands the map to the checkpoint writer; a failed earlier write is reported, not fatal.
+  auto save_checkpoint = [&] {
+    integrated_since_checkpoint = 0;
+    try {
+      const auto t0 = std::chrono::steady_clock::now();
+      std::vector<std::byte> bytes = pipeline.Checkpoint();
+      node.Debug() << "checkpoint of " << bytes.size() << " bytes serialised in "
+                   << std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() -
+                                                                t0)
+                          .count()
+                   << " ms";
+      checkpoint->Submit(std::move(bytes));
+    } catch (const recon::ReconError& e) {
+      node.Error() << e.what() << " (the map is not checkpointed)";
+    }
+  };
   for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
 
   bus::Subscriber depth_sub = node.CreateSubscriber<msgs::Image>("camera/depth");
@@ -173,6 +213,9 @@ int Run(int argc, char** argv) {
     uncertain_frames += r.state == recon::TrackingState::kUncertain;
     lost_frames += r.state == recon::TrackingState::kLost;
     relocalisations += r.relocalised;
+    if (checkpoint && r.integrated && ++integrated_since_checkpoint >= checkpoint_frames) {
+      save_checkpoint();
+    }
     // One line per change of state, not per frame.
     if (r.state != last_state) {
       if (r.state == recon::TrackingState::kLost) {
@@ -326,6 +369,10 @@ int Run(int argc, char** argv) {
       {&reset_sub,
        [&](bus::Sample&&) {
          pipeline.Reset();
+         if (checkpoint) {
+           checkpoint->Discard();  // the old map must not come back on a restart
+           integrated_since_checkpoint = 0;
+         }
          pending_depth.reset();
          recent_poses.clear();
          light_world.reset();
@@ -352,6 +399,19 @@ int Run(int argc, char** argv) {
               << options.volume.size_m << " m, " << options.threads << " threads";
   node.Spin(handlers);
   if (pending_depth) process(*pending_depth, nullptr);
+  bool checkpoint_failed = false;
+  if (checkpoint) {
+    try {
+      checkpoint->Submit(pipeline.Checkpoint());
+      checkpoint->Flush();
+      node.Info() << "map checkpointed to " << checkpoint_path << " ("
+                  << pipeline.volume().ObservedBricks() << " bricks, " << checkpoint->written()
+                  << " checkpoints this run)";
+    } catch (const recon::ReconError& e) {
+      node.Error() << e.what();
+      checkpoint_failed = true;
+    }
+  }
   std::sort(total_ms.begin(), total_ms.end());
   node.Info() << "processed " << frames << " frames, median "
               << (total_ms.empty() ? 0.0 : total_ms[total_ms.size() / 2]) << " ms";
@@ -379,7 +439,7 @@ int Run(int argc, char** argv) {
                  << "fail_on_lost_ratio " << fail_on_lost_ratio;
     return 3;
   }
-  return 0;
+  return checkpoint_failed ? 1 : 0;
 }
 
 }  // namespace

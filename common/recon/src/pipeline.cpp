@@ -3,7 +3,10 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <ctime>
+
+#include "byte_io.h"
 
 namespace probeless::recon {
 
@@ -71,6 +74,138 @@ void FusionPipeline::Reset() {
   uncertain_run_ = 0;
   since_good_s_ = 0;
   last_stamp_ns_ = 0;
+  resume_model_ = false;
+}
+
+namespace {
+constexpr char kCheckpointMagic[8] = {'P', 'L', 'F', 'U', 'S', 'M', 'A', 'P'};
+constexpr uint32_t kCheckpointVersion = 1;
+constexpr uint32_t kByteOrderMark = 0x01020304;
+}  // namespace
+
+std::vector<std::byte> FusionPipeline::Checkpoint() const {
+  std::vector<std::byte> out;
+  if (state_ == TrackingState::kEmpty) return out;
+  detail::ByteWriter w(out);
+  w.PutBytes(kCheckpointMagic, sizeof kCheckpointMagic);
+  w.Put(kCheckpointVersion);
+  w.Put(kByteOrderMark);
+  const VolumeOptions& v = volume_->options();
+  w.Put(int32_t{v.resolution});
+  w.Put(v.size_m);
+  w.Put(v.origin);
+  w.Put(v.truncation_m);
+  w.Put(int32_t{v.max_weight});
+  w.Put(model_.camera_to_world);  // the last integrated pose
+  w.Put(since_good_s_);
+  w.Put(last_stamp_ns_);
+  const TrackingQualityMonitor::SavedState m = monitor_.Saved();
+  w.Put(int32_t{m.accepted});
+  w.Put(m.mean_rms_m);
+  w.Put(m.mean_inlier_fraction);
+  w.Put(uint8_t{m.have_velocity});
+  w.Put(m.velocity);
+  volume_->AppendObservedBricks(out);
+  w.Put(detail::Checksum(out));
+  return out;
+}
+
+void FusionPipeline::Resume(std::span<const std::byte> checkpoint, const std::string& name) {
+  Reset();
+  try {
+    if (checkpoint.size() < sizeof kCheckpointMagic ||
+        std::memcmp(checkpoint.data(), kCheckpointMagic, sizeof kCheckpointMagic) != 0) {
+      throw ReconError(name + ": not a fusion checkpoint (expected it to start with PLFUSMAP)");
+    }
+    detail::ByteReader r(checkpoint, name);
+    char magic[8];
+    r.GetBytes(magic, sizeof magic);
+    const uint32_t version = r.Get<uint32_t>();
+    if (version != kCheckpointVersion) {
+      throw ReconError(name + ": checkpoint version " + std::to_string(version) + ", expected " +
+                       std::to_string(kCheckpointVersion));
+    }
+    if (r.Get<uint32_t>() != kByteOrderMark) {
+      throw ReconError(name + ": written on a machine of another byte order");
+    }
+    r.Need(8);  // the checksum
+    const auto body = checkpoint.first(checkpoint.size() - 8);
+    uint64_t stored;
+    std::memcpy(&stored, checkpoint.data() + body.size(), 8);
+    if (detail::Checksum(body) != stored) {
+      throw ReconError(name + ": checksum mismatch (the file is corrupt or truncated)");
+    }
+    const VolumeOptions& v = volume_->options();
+    auto differs = [&](const char* field, const std::string& theirs, const std::string& ours) {
+      throw ReconError(name + ": written for volume " + field + " " + theirs +
+                       ", the pipeline has " + ours);
+    };
+    const int32_t resolution = r.Get<int32_t>();
+    if (resolution != v.resolution) {
+      differs("resolution", std::to_string(resolution), std::to_string(v.resolution));
+    }
+    const float size_m = r.Get<float>();
+    if (size_m != v.size_m) differs("size_m", std::to_string(size_m), std::to_string(v.size_m));
+    const Vec3f origin = r.Get<Vec3f>();
+    if (origin.x != v.origin.x || origin.y != v.origin.y || origin.z != v.origin.z) {
+      auto text = [](Vec3f o) {
+        std::string t = "(";
+        t += std::to_string(o.x);
+        t += ", ";
+        t += std::to_string(o.y);
+        t += ", ";
+        t += std::to_string(o.z);
+        return t + ")";
+      };
+      differs("origin", text(origin), text(v.origin));
+    }
+    const float truncation_m = r.Get<float>();
+    if (truncation_m != v.truncation_m) {
+      differs("truncation_m", std::to_string(truncation_m), std::to_string(v.truncation_m));
+    }
+    const int32_t max_weight = r.Get<int32_t>();
+    if (max_weight != v.max_weight) {
+      differs("max_weight", std::to_string(max_weight), std::to_string(v.max_weight));
+    }
+    const Pose good = r.Get<Pose>();
+    for (double x : good.r) {
+      if (!std::isfinite(x)) throw ReconError(name + ": the saved pose is not finite");
+    }
+    for (double x : good.t) {
+      if (!std::isfinite(x)) throw ReconError(name + ": the saved pose is not finite");
+    }
+    const double since_good_s = r.Get<double>();
+    if (!(since_good_s >= 0) || !std::isfinite(since_good_s)) {
+      throw ReconError(name + ": seconds since the saved pose must be finite and >= 0");
+    }
+    const int64_t last_stamp_ns = r.Get<int64_t>();
+    TrackingQualityMonitor::SavedState m;
+    m.accepted = r.Get<int32_t>();
+    m.mean_rms_m = r.Get<float>();
+    m.mean_inlier_fraction = r.Get<float>();
+    m.have_velocity = r.Get<uint8_t>() != 0;
+    r.GetBytes(m.velocity, sizeof m.velocity);
+    try {
+      monitor_.Restore(m);
+    } catch (const ReconError& e) {
+      throw ReconError(name + ": " + e.what());
+    }
+    size_t offset = r.offset();
+    volume_->ReadObservedBricks(body, &offset, name);
+    if (offset != body.size()) {
+      throw ReconError(name + ": " + std::to_string(body.size() - offset) +
+                       " bytes after the last brick");
+    }
+    model_.camera_to_world = good;
+    pose_ = good;
+    since_good_s_ = since_good_s;
+    last_stamp_ns_ = last_stamp_ns;
+    state_ = TrackingState::kLost;  // relocalise against the restored map
+    resume_model_ = true;
+  } catch (const ReconError&) {
+    Reset();
+    throw;
+  }
 }
 
 void FusionPipeline::Track(double interval_s, FrameResult& r) {
@@ -165,8 +300,9 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
                      std::to_string(intensity->height) + " but the depth is " +
                      std::to_string(depth.width) + "x" + std::to_string(depth.height));
   }
-  if (state_ != TrackingState::kEmpty && (frame_.raw_depth.width != intrinsics.width ||
-                                          frame_.raw_depth.height != intrinsics.height)) {
+  if (state_ != TrackingState::kEmpty && !resume_model_ &&
+      (frame_.raw_depth.width != intrinsics.width ||
+       frame_.raw_depth.height != intrinsics.height)) {
     throw ReconError("fusion: frame size changed from " + std::to_string(frame_.raw_depth.width) +
                      "x" + std::to_string(frame_.raw_depth.height) + " (Reset first)");
   }
@@ -182,6 +318,15 @@ FrameResult FusionPipeline::Process(const DepthImage& depth, const Intrinsics& i
                                 ? (stamp_ns - last_stamp_ns_) * 1e-9
                                 : 0.0;
   if (stamp_ns > 0) last_stamp_ns_ = stamp_ns;
+  if (resume_model_) {
+    // The first frame after Resume: the model to relocalise against, from the restored volume at
+    // the saved pose, with this frame's intrinsics.
+    const Intrinsics track_k = intrinsics.Level(options_.track_level);
+    const Pose good = model_.camera_to_world;
+    volume_->Raycast(good, track_k, view_, pool);
+    BuildModelPyramid(view_, good, track_k, options_.preprocess.levels, model_);
+    resume_model_ = false;
+  }
   if (known_pose != nullptr || state_ == TrackingState::kEmpty) {
     pose_ = known_pose != nullptr ? *known_pose : pose_;
     state_ = TrackingState::kTracking;

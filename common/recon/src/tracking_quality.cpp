@@ -152,6 +152,32 @@ void TrackingQualityMonitor::Reset() {
   have_velocity_ = false;
 }
 
+TrackingQualityMonitor::SavedState TrackingQualityMonitor::Saved() const {
+  SavedState s;
+  s.accepted = accepted_;
+  s.mean_rms_m = mean_rms_;
+  s.mean_inlier_fraction = mean_inliers_;
+  s.have_velocity = have_velocity_;
+  std::copy(velocity_, velocity_ + 6, s.velocity);
+  return s;
+}
+
+void TrackingQualityMonitor::Restore(const SavedState& s) {
+  if (s.accepted < 0) throw ReconError("tracking quality: accepted frames must be >= 0");
+  if (!(std::isfinite(s.mean_rms_m) && s.mean_rms_m >= 0) ||
+      !(std::isfinite(s.mean_inlier_fraction) && s.mean_inlier_fraction >= 0)) {
+    throw ReconError("tracking quality: running means must be finite and >= 0");
+  }
+  for (double v : s.velocity) {
+    if (!std::isfinite(v)) throw ReconError("tracking quality: velocity must be finite");
+  }
+  accepted_ = s.accepted;
+  mean_rms_ = s.mean_rms_m;
+  mean_inliers_ = s.mean_inlier_fraction;
+  have_velocity_ = s.have_velocity;
+  std::copy(s.velocity, s.velocity + 6, velocity_);
+}
+
 double TrackingQualityMonitor::Interval(double interval_s) const {
   return interval_s > 0 ? interval_s : options_.nominal_frame_interval_s;
 }

@@ -7,6 +7,8 @@
 #include <fstream>
 #include <limits>
 
+#include "byte_io.h"
+
 namespace probeless::recon {
 
 namespace {
@@ -115,6 +117,68 @@ bool TsdfVolume::BrickObserved(int i, int j, int k) const {
 
 int TsdfVolume::ObservedBricks() const {
   return static_cast<int>(std::count(observed_.begin(), observed_.end(), uint8_t{1}));
+}
+
+void TsdfVolume::AppendObservedBricks(std::vector<std::byte>& out) const {
+  detail::ByteWriter w(out);
+  const uint32_t count = static_cast<uint32_t>(ObservedBricks());
+  out.reserve(out.size() + 4 + static_cast<size_t>(count) * (4 + 512 * 5));
+  w.Put(count);
+  for (size_t b = 0; b < observed_.size(); ++b) {
+    if (!observed_[b]) continue;
+    w.Put(static_cast<uint32_t>(b));
+    w.PutBytes(&tsdf_[b << 9], 512 * sizeof(float));
+    w.PutBytes(&weight_[b << 9], 512);
+  }
+}
+
+void TsdfVolume::ReadObservedBricks(std::span<const std::byte> in, size_t* offset,
+                                    const std::string& name) {
+  Reset();
+  detail::ByteReader r(in.subspan(std::min(*offset, in.size())), name);
+  try {
+    const uint32_t count = r.Get<uint32_t>();
+    if (count > observed_.size()) {
+      throw ReconError(name + ": " + std::to_string(count) + " bricks, the volume has " +
+                       std::to_string(observed_.size()));
+    }
+    r.Need(static_cast<size_t>(count) * (4 + 512 * 5));
+    int64_t previous = -1;
+    for (uint32_t n = 0; n < count; ++n) {
+      const uint32_t b = r.Get<uint32_t>();
+      if (b >= observed_.size() || static_cast<int64_t>(b) <= previous) {
+        throw ReconError(name + ": brick index " + std::to_string(b) +
+                         " out of range or not increasing (bricks 0.." +
+                         std::to_string(observed_.size() - 1) + ")");
+      }
+      previous = b;
+      float* tsdf = &tsdf_[static_cast<size_t>(b) << 9];
+      uint8_t* weight = &weight_[static_cast<size_t>(b) << 9];
+      r.GetBytes(tsdf, 512 * sizeof(float));
+      r.GetBytes(weight, 512);
+      observed_[b] = 1;
+      float lowest = 1.0f;
+      for (int v = 0; v < 512; ++v) {
+        const bool ok = weight[v] == 0 ? tsdf[v] == kUnobserved
+                                       : weight[v] <= options_.max_weight && tsdf[v] >= -1.0f &&
+                                             tsdf[v] <= 1.0f;
+        if (!ok) {
+          throw ReconError(name + ": brick " + std::to_string(b) + " voxel " + std::to_string(v) +
+                           " has weight " + std::to_string(weight[v]) + " and tsdf " +
+                           std::to_string(tsdf[v]) + " (expected weight <= max_weight " +
+                           std::to_string(options_.max_weight) +
+                           " and tsdf in [-1, 1], or weight 0 unobserved)");
+        }
+        lowest = std::min(lowest, weight[v] ? tsdf[v] : 1.0f);
+      }
+      surface_[b] = lowest < 0.999f;
+    }
+  } catch (const ReconError&) {
+    Reset();
+    throw;
+  }
+  UpdateCoarse();
+  *offset += r.offset();
 }
 
 IntegrateStats TsdfVolume::Integrate(const DepthImage& depth, const Intrinsics& k,

@@ -8,9 +8,12 @@
 // association gate) until a candidate passes the test as tracked; Reset() starts a new map.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "probeless/recon/depth_merge.h"
 #include "probeless/recon/icp.h"
@@ -122,6 +125,22 @@ class FusionPipeline {
   // Forgets the map and the pose (the next frame starts at options.initial_pose).
   void Reset();
 
+  // The map and what tracking needs to resume against it, as one self-contained checkpoint (the
+  // fusion node writes it to a file, checkpoint.h): the volume's options and observed bricks, the
+  // last integrated pose (camera -> world), the seconds since it and the last frame's stamp, and
+  // the tracking monitor's running state, with a checksum. Empty before the first frame (nothing
+  // to save). The volume is not changed by lost or uncertain frames, so a checkpoint taken at
+  // any time is consistent.
+  std::vector<std::byte> Checkpoint() const;
+  // Replaces the map and the tracking state by a Checkpoint() of a pipeline with the same volume
+  // options. The next frame relocalises against the restored map (as after a loss: from the
+  // saved pose and its constant-velocity extrapolation over the time since the saved stamp, at
+  // most relocalise_max_extrapolation_s) at whatever size it has; until a frame is tracked, the
+  // frames are lost. Throws ReconError "<name>: ..." (the pipeline then is Reset) for a file that
+  // is not a checkpoint, of another version or byte order, truncated, with a wrong checksum,
+  // written for other volume options (naming the first that differs) or with invalid contents.
+  void Resume(std::span<const std::byte> checkpoint, const std::string& name);
+
   TrackingState state() const { return state_; }
   const Pose& pose() const { return pose_; }
   const TsdfVolume& volume() const { return *volume_; }
@@ -157,6 +176,9 @@ class FusionPipeline {
   int uncertain_run_ = 0;      // consecutive uncertain frames before this one
   double since_good_s_ = 0;    // seconds since the last integrated frame (lost: extrapolation)
   int64_t last_stamp_ns_ = 0;  // of the previous frame, 0 = none
+  // Resumed from a checkpoint: model_ is to be raycast at model_.camera_to_world with the next
+  // frame's intrinsics before it relocalises.
+  bool resume_model_ = false;
   FramePyramid frame_;
   ModelPyramid model_;
   GeometryView view_;

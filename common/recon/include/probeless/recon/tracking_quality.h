@@ -158,6 +158,19 @@ class TrackingQualityMonitor {
   // itself without a velocity).
   Pose Predict(const Pose& previous, double interval_s) const;
 
+  // The running state (the means and the velocity), for a checkpoint of the pipeline
+  // (FusionPipeline::Checkpoint): Restore(Saved()) continues exactly where this monitor was.
+  struct SavedState {
+    int accepted = 0;
+    float mean_rms_m = 0;
+    float mean_inlier_fraction = 0;
+    bool have_velocity = false;
+    double velocity[6] = {};  // rad/s (wx, wy, wz), m/s (tx, ty, tz), camera frame
+  };
+  SavedState Saved() const;
+  // Throws ReconError for a negative count, non-finite or negative means or a non-finite velocity.
+  void Restore(const SavedState& state);
+
   int accepted_frames() const { return accepted_; }
   float mean_rms_m() const { return mean_rms_; }
   float mean_inlier_fraction() const { return mean_inliers_; }

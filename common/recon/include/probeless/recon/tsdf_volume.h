@@ -9,7 +9,9 @@
 // origin + (i + 0.5, j + 0.5, k + 0.5) * voxel_size.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -118,6 +120,18 @@ class TsdfVolume {
   // Whether the brick holding voxel (i, j, k) has been observed.
   bool BrickObserved(int i, int j, int k) const;
   int ObservedBricks() const;
+
+  // The observed bricks, for a checkpoint of the map (FusionPipeline::Checkpoint): appends to
+  // `out` their count (uint32) and, per brick in increasing order, its index (uint32, brick-major:
+  // (bk * side + bj) * side + bi for side = resolution / 8), its 512 TSDF values (float, in units
+  // of the truncation distance) and its 512 weights (uint8), in this machine's representation.
+  void AppendObservedBricks(std::vector<std::byte>& out) const;
+  // Replaces every observation by bricks in AppendObservedBricks' layout, read from `in` at
+  // `*offset` (advanced past them), written by a volume with the same options. Throws ReconError
+  // "<name>: ..." for truncated data, a brick index out of range or not increasing, a weight above
+  // max_weight, a TSDF value outside [-1, 1] where the weight is > 0 or a weight-0 voxel that is
+  // not unobserved; the volume is then empty.
+  void ReadObservedBricks(std::span<const std::byte> in, size_t* offset, const std::string& name);
 
   // The zero level set of the observed voxels (marching cubes on each voxel cube, split into six
   // tetrahedra so no case tables are needed; normals from the TSDF gradient).
