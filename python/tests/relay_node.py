@@ -1,5 +1,5 @@
 """A Python node for the tests: camera/image -> python/image, every pixel inverted (255 - v),
-written into a bus loan (params queue_depth 4, delay_s 0: a sleep per frame). Logs the frames relayed and dropped at exit."""
+written into a bus loan (params queue_depth 4, delay_s 0: a sleep per frame, slots 8: of its publisher). Logs the frames relayed and dropped at exit."""
 
 import time
 
@@ -13,13 +13,14 @@ def main():
     node = probeless.Node("relay")
     queue_depth = node.param("queue_depth", 4)
     delay_s = node.param("delay_s", 0.0)
+    slots = node.param("slots", 8)
     state = {"publisher": None, "frames": 0}
 
     def on_image(sample):
         image = sample.msg
         if state["publisher"] is None:
             state["publisher"] = node.create_publisher(
-                msgs.Image, "python/image", slot_count=8,
+                msgs.Image, "python/image", slot_count=slots,
                 max_message_bytes=msgs.Image.message_bytes_for(image.width, image.height,
                                                                image.encoding))
         with state["publisher"].loan_image(image.width, image.height, image.encoding) as loan:

@@ -124,8 +124,8 @@ def test_annotate_example_draws_the_light_into_a_loan(processes):
     sh.coefficients[0] = 0.5
     sh.coefficients[3] = -0.4  # Y_1,1 = -c x: light from +x
     sh.dominant_direction = [1, 0, 0]
-    lights.publish(sh)
     acks = probeless.Subscriber("/annot/annotate/ack", msgs.Ack, queue_depth=8)
+    lights.publish(sh)
     with acks.take(timeout=10.0) as ack:
         assert ack.msg.topic == "/annot/scene/light"
     with images.loan_image(320, 240, "rgb8") as loan:
