@@ -143,3 +143,54 @@ def test_annotate_example_draws_the_light_into_a_loan(processes):
     assert (pixels[200:, :100] == 10).all()           # the rest is the input
     assert node.stop() == 0
     assert "[info] [/annot/annotate] annotated 1 frames, dropped 0" in node.stderr
+
+
+def test_scene_pipeline_equals_the_scene_light_node(processes):
+    """The same frame through the C++ scene_light node and through light.ScenePipeline with its
+    defaults gives the same light: the binding runs the node's library object and options."""
+    from conftest import BIN_DIR
+
+    truth = np.array([0.7, -0.5, -0.5]) / np.linalg.norm([0.7, -0.5, -0.5])
+    image, depth, (fx, fy, cx, cy) = synthetic_room(truth)
+    height, width = depth.shape
+    millimetres = (depth * 1000).astype(np.uint16)
+    stamp = 1_700_000_000_000_000_000
+    node = processes([BIN_DIR / "scene_light", "--ros-args", "-r", "__ns:=/sl", "-p",
+                      "mode:=depth", "-p", "publish_transfer:=false"])
+    info_pub = probeless.Publisher("/sl/camera/camera_info", msgs.CameraInfo)
+    image_pub = probeless.Publisher("/sl/camera/image", msgs.Image,
+                                    max_message_bytes=msgs.Image.message_bytes_for(
+                                        width, height, "rgb8"))
+    depth_pub = probeless.Publisher("/sl/camera/depth", msgs.Image,
+                                    max_message_bytes=msgs.Image.message_bytes_for(
+                                        width, height, "depth16"))
+    lights = probeless.Subscriber("/sl/scene/light", msgs.ShLight, queue_depth=4)
+    acks = probeless.Subscriber("/sl/scene_light/ack", msgs.Ack, queue_depth=8)
+    assert wait_until(lambda: subscribers_of("/sl/camera/depth", "/sl/scene_light"))
+    info = msgs.CameraInfo(width=width, height=height, fx=fx, fy=fy, cx=cx, cy=cy,
+                           depth_scale=0.001)
+    info.header.stamp_ns = stamp
+    info_pub.publish(info)
+    with image_pub.loan_image(width, height, "rgb8") as loan:
+        loan.msg.header.stamp_ns = stamp
+        loan.msg.pixels[:] = image
+        loan.publish()
+    for _ in range(2):  # camera_info and image handled before the depth that triggers the frame
+        with acks.take(timeout=10.0):
+            pass
+    with depth_pub.loan_image(width, height, "depth16") as loan:
+        loan.msg.header.stamp_ns = stamp
+        loan.msg.pixels[:] = millimetres
+        loan.publish()
+    sample = lights.take(timeout=60.0)
+    assert sample is not None, (node.stop(), node.stderr)
+    with sample:
+        from_node = sample.msg.copy()
+    ours = light.ScenePipeline(mode="depth").process(image, info, depth=millimetres,
+                                                     stamp_ns=stamp)["light"]
+    assert from_node.bands == ours.bands and from_node.units == ours.units
+    np.testing.assert_allclose(ours.coefficients, from_node.coefficients, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(ours.dominant_direction, from_node.dominant_direction, atol=1e-5)
+    assert ours.confidence == pytest.approx(from_node.confidence, abs=1e-6)
+    assert ours.intensity == pytest.approx(from_node.intensity, rel=1e-5)
+    assert node.stop() == 0
