@@ -1,5 +1,6 @@
 """A Python node for the tests: camera/image -> python/image, every pixel inverted (255 - v),
-written into a bus loan (params queue_depth 4, delay_s 0: a sleep per frame, slots 8: of its publisher). Logs the frames relayed and dropped at exit."""
+written into a bus loan. Params: queue_depth (4), delay_s (0: a sleep per frame), slots (8: of
+its publisher). Logs the frames relayed and dropped at exit."""
 
 import time
 

@@ -132,7 +132,7 @@ def test_no_allocation_of_frame_size_per_message(topic):
 
 
 def test_wrong_type_is_the_bus_type_error(topic):
-    images = probeless.Publisher(topic, msgs.Image, max_message_bytes=FRAME)  # noqa: F841
+    images = probeless.Publisher(topic, msgs.Image, max_message_bytes=FRAME)
     expected = (f"^topic '{topic}' carries type 'probeless_msgs/Image' "
                 f"\\(layout 0x{msgs.Image.layout_hash:016x}\\), not 'probeless_msgs/ShLight' "
                 f"\\(layout 0x{msgs.ShLight.layout_hash:016x}\\)$")
@@ -147,6 +147,7 @@ def test_wrong_type_is_the_bus_type_error(topic):
         pub.publish(msgs.Pose())
     with pytest.raises(probeless.BusError, match="invalid|topic"):
         probeless.Subscriber("no_slash", msgs.ShLight)
+    assert images.subscriber_count == 0  # the failed joins left nothing behind
 
 
 def test_drops_history_and_the_held_sample_limit(topic):

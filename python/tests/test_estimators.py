@@ -38,7 +38,8 @@ def test_face_light_recovers_the_light_of_its_forward_model():
 
 def test_face_light_errors_name_the_problem():
     estimator = face_light.FaceLightEstimator()
-    with pytest.raises(probeless.FaceLightError, match=r"^FaceLightEstimator: 9 RGB values, expected 3 x \d+ samples$"):
+    with pytest.raises(probeless.FaceLightError,
+                       match=r"^FaceLightEstimator: 9 RGB values, expected 3 x \d+ samples$"):
         estimator.estimate_rgb(np.zeros((3, 3), np.float32))
     with pytest.raises(ValueError, match=r"valid mask has 2 entries for \d+ samples"):
         estimator.estimate_rgb(np.zeros((estimator.sample_count, 3), np.float32),
@@ -48,8 +49,8 @@ def test_face_light_errors_name_the_problem():
 
 
 def synthetic_room(direction, width=320, height=240):  # noqa: C901
-    """A camera 2 m in front of a wall with a floor and a ball, Lambertian under a directional light plus
-    ambient: rgb8 (sRGB), depth in metres, intrinsics."""
+    """A camera 2 m in front of a wall with a floor and a ball, Lambertian under a directional
+    light plus ambient: rgb8 (sRGB), depth in metres, intrinsics."""
     fx = fy = 0.9 * width
     cx, cy = (width - 1) / 2, (height - 1) / 2
     v, u = np.mgrid[0:height, 0:width].astype(np.float64)

@@ -72,7 +72,8 @@ def test_thirty_fps_frames_through_a_python_node_without_drops(frames_dir, tmp_p
     period = np.median(np.diff(stamps)) * 1e-9
     assert 0.025 < period < 0.042, f"median period {period * 1e3:.1f} ms, expected ~33"
     assert graph.stop(signal.SIGINT, timeout=30) == 0, graph.stderr
-    assert re.search(r"\[info\] \[/relay\] relayed 60 frames, dropped 0", graph.stderr), graph.stderr
+    assert re.search(r"\[info\] \[/relay\] relayed 60 frames, dropped 0",
+                     graph.stderr), graph.stderr
     # The C++ recorder received every frame the Python node published.
     reader = probeless.log.McapReader(str(out))
     messages = list(reader.messages(topics=["/python/image"]))
