@@ -329,6 +329,12 @@ void BindBus(py::module_& m) {
       .def(
           "copy", [](const PySample& s) { return s.type->wrap(s.storage).attr("copy")(); },
           "An owned copy of the message (valid after release).")
+      .def("__repr__",
+           [](const PySample& s) {
+             return "<probeless.Sample " + s.type->name + " #" +
+                    std::to_string(s.storage->info().sequence) + " of " + s.storage->topic() +
+                    (s.storage->released() ? " (released)>" : ">");
+           })
       .def("__enter__", [](py::object self) { return self; })
       .def("__exit__", [](const PySample& s, py::object type, py::object, py::object) {
         if (type.is_none()) {
@@ -497,6 +503,15 @@ void BindBus(py::module_& m) {
             return Wrap(std::move(*sample), *s.state);
           },
           "The oldest queued sample or None, without waiting.")
+      .def("__iter__", [](py::object self) { return self; })
+      .def(
+          "__next__",
+          [](const PySubscriber& s) {
+            std::optional<PySample> sample = Take(*s.state, std::nullopt);
+            if (!sample) throw py::stop_iteration();
+            return std::move(*sample);
+          },
+          "for sample in subscriber: the samples until shutdown (SIGINT/SIGTERM).")
       .def_property_readonly(
           "dropped", [](const PySubscriber& s) { return s.state->Get().dropped(); },
           "messages lost to drop-oldest so far")

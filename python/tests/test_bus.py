@@ -65,6 +65,7 @@ def test_received_image_is_a_view_of_the_publishers_shared_memory(topic):
         # The same bytes the loan wrote: one mapping of the slot per process, no copy.
         assert mapping_of(written_at).split()[-1] == line.split()[-1]
         assert sample.info.size == FRAME and sample.info.sequence == 1
+        assert repr(sample) == f"<probeless.Sample probeless_msgs/Image #1 of {topic}>"
         del pixels, image
 
 

@@ -111,3 +111,36 @@ def test_help_and_bad_arguments_exit_like_a_cpp_node(tmp_path, processes):
     child = processes(python_script(script, "--ros-args", "-r", "bad"))
     assert child.wait() == 2
     assert child.stderr.startswith("[error] [listener] ")
+
+
+ITERATE_SCRIPT = textwrap.dedent("""
+    import probeless
+    from probeless import msgs
+
+    node = probeless.Node("iterate")
+    sub = node.create_subscriber(msgs.ShLight, "light", queue_depth=8)
+    print("ready", flush=True)
+    bands = []
+    for sample in sub:                 # until SIGTERM
+        with sample:
+            bands.append(sample.msg.bands)
+            node.ack(sub, sample.info)
+    print("bands", bands, flush=True)
+""")
+
+
+def test_iterating_a_subscriber_until_shutdown_with_explicit_acks(tmp_path, processes):
+    script = tmp_path / "iterate.py"
+    script.write_text(ITERATE_SCRIPT)
+    child = processes(python_script(script, "--ros-args", "-r", "__ns:=/it"))
+    assert child.popen.stdout.readline().strip() == "ready"
+    acks = probeless.Subscriber("/it/iterate/ack", msgs.Ack, queue_depth=8)
+    assert wait_until(lambda: subscribers_of("/it/light", "/it/iterate"))
+    lights = probeless.Publisher("/it/light", msgs.ShLight)
+    for bands in (1, 2, 3):
+        lights.publish(msgs.ShLight(bands=bands))
+    for sequence in (1, 2, 3):
+        with acks.take(timeout=5.0) as ack:
+            assert ack.msg.publish_sequence == sequence
+    assert child.stop(signal.SIGTERM) == 0
+    assert "bands [1, 2, 3]" in child.stdout
