@@ -197,3 +197,17 @@ def test_introspection_sees_the_python_participants(topic):
     assert [s["node_name"] for s in info["subscribers"]] == ["/py_sub"]
     assert pub.subscriber_count == 1 and sub.publisher_count == 1
     assert shm_segments()
+
+
+def test_publish_copies_an_owned_message_with_its_payload(topic):
+    pub = probeless.Publisher(topic, msgs.Image, max_message_bytes=msgs.Image.message_bytes_for(
+        8, 4, "mono16"))
+    sub = probeless.Subscriber(topic, msgs.Image)
+    image = msgs.Image.create(8, 4, "mono16")
+    image.pixels[:] = np.arange(32, dtype=np.uint16).reshape(4, 8)
+    image.header.frame_id = "cam"
+    assert pub.publish(image) == 1
+    with sub.take(timeout=2.0) as sample:
+        assert sample.msg.header.frame_id == "cam"
+        assert sample.msg.pixels.tolist() == np.arange(32).reshape(4, 8).tolist()
+        assert sample.msg.pixels.ctypes.data != image.pixels.ctypes.data
