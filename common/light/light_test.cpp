@@ -1055,6 +1055,25 @@ TEST(Messages, GeometryBufferAndShLightRoundTrip) {
   out.Validate();
 }
 
+TEST(Messages, WorldPointInCamera) {
+  // Camera at (1, 2, 3) turned 90 degrees about world z (camera x -> world y), quaternion not
+  // normalised: the world point one metre along world y from it is one metre along camera x.
+  msgs::RigidTransform pose;
+  pose.translation = {1, 2, 3};
+  const double h = std::sqrt(0.5) * 2;
+  pose.rotation = {h, 0, 0, h};
+  const std::array<float, 3> p = light::WorldPointInCamera(pose, {1, 3, 3});
+  EXPECT_NEAR(p[0], 1, 1e-6);
+  EXPECT_NEAR(p[1], 0, 1e-6);
+  EXPECT_NEAR(p[2], 0, 1e-6);
+  pose.rotation = {0, 0, 0, 0};
+  EXPECT_EQ(ErrorOf([&] {
+              light::WorldPointInCamera(pose, {0, 0, 0});
+            }),
+            "light::WorldPointInCamera: the camera's rotation quaternion has norm 0.000000, "
+            "expected a finite non-zero norm");
+}
+
 TEST(Errors, BadInputsGiveOneLineMessages) {
   Scene scene(Shape::kPlane);
   light::TransferComputer computer({});

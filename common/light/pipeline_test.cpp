@@ -33,12 +33,14 @@ struct Frame {
   light::Intrinsics k{150, 150, 79.5, 59.5};
   std::vector<float> depth, normals, albedo, grey;
   std::vector<uint8_t> colour;
-  Frame() {
+  // second_sphere: another sphere (centre (-0.7, 0.6, 3.2), radius 0.4, the same material).
+  explicit Frame(bool second_sphere = false) {
     depth.assign(w * h, 0);
     normals.assign(3 * w * h, 0);
     albedo.assign(w * h, 0);
     colour.assign(3 * w * h, 0);
     const double c[3] = {0.3, 0.5, 2.5}, radius = 0.4;
+    const double c2[3] = {-0.7, 0.6, 3.2};
     for (int v = 0; v < h; ++v) {
       for (int u = 0; u < w; ++u) {
         const double d[3] = {(u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0};  // ray with z = 1
@@ -53,15 +55,18 @@ struct Frame {
           rgb[0] = rgb[1] = rgb[2] = 200;
         }
         const double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        const double dc = d[0] * c[0] + d[1] * c[1] + d[2] * c[2];
-        const double cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-        const double disc = dc * dc - dd * (cc - radius * radius);
-        if (disc > 0) {
-          const double ts = (dc - std::sqrt(disc)) / dd;
-          if (ts > 0 && ts < t) {
-            t = ts, a = 0.5;
-            for (int i = 0; i < 3; ++i) n[i] = (t * d[i] - c[i]) / radius;
-            rgb[0] = 60, rgb[1] = 90, rgb[2] = 200;
+        for (const double* sc : {c, second_sphere ? c2 : nullptr}) {
+          if (sc == nullptr) continue;
+          const double dc = d[0] * sc[0] + d[1] * sc[1] + d[2] * sc[2];
+          const double cc = sc[0] * sc[0] + sc[1] * sc[1] + sc[2] * sc[2];
+          const double disc = dc * dc - dd * (cc - radius * radius);
+          if (disc > 0) {
+            const double ts = (dc - std::sqrt(disc)) / dd;
+            if (ts > 0 && ts < t) {
+              t = ts, a = 0.5;
+              for (int i = 0; i < 3; ++i) n[i] = (t * d[i] - sc[i]) / radius;
+              rgb[0] = 60, rgb[1] = 90, rgb[2] = 200;
+            }
           }
         }
         const size_t p = static_cast<size_t>(v) * w + u;
@@ -97,6 +102,24 @@ struct Frame {
           std::sqrt(r2);
       grey[p] = static_cast<float>(albedo[p] *
                                    (power * std::max(0.0, cosine) / (kPi * r2) + ambient * kY0));
+    }
+  }
+  // LitByDistant with the light towards `near_l` within `near_m` metres of `centre` (camera
+  // frame) and towards `far_l` elsewhere: an indoor light that varies across the view.
+  void LitByRegions(const double* centre, double near_m, const double* near_l, const double* far_l,
+                    double irradiance, double ambient) {
+    grey.resize(w * h);
+    for (size_t p = 0; p < grey.size(); ++p) {
+      const int u = static_cast<int>(p % w), v = static_cast<int>(p / w);
+      const double x[3] = {(u - k.cx) * depth[p] / k.fx, (v - k.cy) * depth[p] / k.fy, depth[p]};
+      const double d2 = (x[0] - centre[0]) * (x[0] - centre[0]) +
+                        (x[1] - centre[1]) * (x[1] - centre[1]) +
+                        (x[2] - centre[2]) * (x[2] - centre[2]);
+      const double* l = d2 < near_m * near_m ? near_l : far_l;
+      const double cosine =
+          normals[3 * p] * l[0] + normals[3 * p + 1] * l[1] + normals[3 * p + 2] * l[2];
+      grey[p] = static_cast<float>(albedo[p] *
+                                   (irradiance * std::max(0.0, cosine) / kPi + ambient * kY0));
     }
   }
   light::GeometryView View() const { return {w, h, k, depth, normals, {}}; }
@@ -343,6 +366,82 @@ TEST(ScenePipeline, TemporalRotatesTheHistoryByThePose) {
   }
 }
 
+TEST(ScenePipeline, FocusFollowsTheLightAtTheInsertedObject) {
+  // Two spheres on the floor; the second and the floor within 0.8 m of it under a light of its
+  // own, the rest under kSun: with the focus on a sphere the fit follows that sphere's light,
+  // without it the two mix.
+  Frame s(/*second_sphere=*/true);
+  const double c1[3] = {0.3, 0.5, 2.5}, c2[3] = {-0.7, 0.6, 3.2};
+  const double other[3] = {-0.70, -0.60, 0.387};  // unit, 82 degrees from kSun
+  s.LitByRegions(c2, 0.8, other, kSun, 3.0, 0.3);
+  light::ScenePipelineOptions o = SmallOptions();
+  o.light_model = light::LightModel::kDistant;
+  o.shadow.enabled = false;
+  auto angle = [](const light::LightEstimate& e, const double* l) {
+    const auto& d = e.dominant_direction;
+    return std::acos(std::clamp(d[0] * l[0] + d[1] * l[1] + d[2] * l[2], -1.0, 1.0)) * 180 / kPi;
+  };
+  light::ScenePipeline plain(o);
+  const light::LightEstimate without = plain.Process(s.Input(1)).light;
+  ASSERT_TRUE(without.valid);
+  light::SceneFrame in = s.Input(1);
+  in.focus = std::array<float, 3>{-0.7f, 0.6f, 3.2f};
+  // Radius 0: the focus is ignored, bit for bit.
+  o.focus.radius_m = 0;
+  light::ScenePipeline off(o);
+  ExpectSameLight(off.Process(in).light, without);
+  o.focus = {.radius_m = 0.3f, .floor = 0.02f};
+  for (const double* focus : {c1, c2}) {
+    in.focus = std::array<float, 3>{static_cast<float>(focus[0]), static_cast<float>(focus[1]),
+                                    static_cast<float>(focus[2])};
+    const double* l = focus == c2 ? other : kSun;
+    light::ScenePipeline focused(o);
+    const light::LightEstimate with = focused.Process(in).light;
+    ASSERT_TRUE(with.valid);
+    // (The residual of the farther, smaller second sphere: the SSDO transfer sees the contact
+    // occlusion that this shading leaves out.)
+    EXPECT_LT(angle(with, l), focus == c2 ? 20.0 : 5.0) << (focus == c2 ? "second" : "first");
+    EXPECT_GT(angle(without, l), angle(with, l) + 5.0) << (focus == c2 ? "second" : "first");
+  }
+}
+
+TEST(ScenePipeline, UncertaintyBlurSoftensByTheExpectedError) {
+  Frame s;
+  s.LitByDistant(kSun, 3.0, 0.3);
+  light::ScenePipelineOptions o = SmallOptions();
+  o.light_model = light::LightModel::kDistant;
+  o.shadow.enabled = false;
+  o.confidence_knots = std::vector<double>{0.0, 45.0, 1.0, 45.0};  // every frame: 45 degrees
+  light::ScenePipeline sharp(o);
+  const light::LightEstimate a = sharp.Process(s.Input(1)).light;
+  o.uncertainty_blur = 1;
+  light::ScenePipeline soft(o);
+  const light::LightEstimate b = soft.Process(s.Input(1)).light;
+  ASSERT_TRUE(a.valid && b.valid);
+  EXPECT_EQ(a.dominant_direction, b.dominant_direction);
+  EXPECT_EQ(a.confidence, b.confidence);
+  const double sigma = 45 * kPi / 180 / std::sqrt(2 * std::log(2.0));
+  ASSERT_EQ(a.coefficients.size(), b.coefficients.size());
+  EXPECT_EQ(a.coefficients[0], b.coefficients[0]);
+  for (size_t k = 1; k < a.coefficients.size(); ++k) {
+    const int l = k < 4 ? 1 : k < 9 ? 2 : 3;
+    EXPECT_NEAR(b.coefficients[k], a.coefficients[k] * std::exp(-0.5 * l * (l + 1) * sigma * sigma),
+                1e-9 + 1e-6 * std::abs(a.coefficients[k]))
+        << "coefficient " << k;
+  }
+  // Band 1 of a 45-degree guess keeps 64 % of its length, band 3 7 %.
+  EXPECT_NEAR(std::exp(-sigma * sigma), 0.64, 0.01);
+  EXPECT_NEAR(std::exp(-6 * sigma * sigma), 0.07, 0.01);
+  // Raw confidence (no calibration): nothing to blur by.
+  o.confidence_knots.emplace();
+  light::ScenePipeline raw(o);
+  const light::LightEstimate c = raw.Process(s.Input(1)).light;
+  light::ScenePipelineOptions o_raw = o;
+  o_raw.uncertainty_blur = 0;
+  light::ScenePipeline raw_sharp(o_raw);
+  ExpectSameLight(c, raw_sharp.Process(s.Input(1)).light);
+}
+
 TEST(ScenePipeline, BadOptionsAndInput) {
   auto error = [](auto&& edit) {
     light::ScenePipelineOptions o = SmallOptions();
@@ -366,6 +465,11 @@ TEST(ScenePipeline, BadOptionsAndInput) {
             "got 0");
   EXPECT_EQ(error([](auto& o) { o.depth_geometry.step = -2; }),
             "light::ScenePipeline: depth_geometry.step must be -1 (by the noise) or >= 1, got -2");
+  EXPECT_EQ(error([](auto& o) { o.focus.floor = 1.5f; }),
+            "light::ScenePipeline: focus.radius_m must be >= 0 and focus.floor in [0, 1], got "
+            "0.500000 and 1.500000");
+  EXPECT_EQ(error([](auto& o) { o.uncertainty_blur = -1; }),
+            "light::ScenePipeline: uncertainty_blur must be >= 0, got -1.000000");
   EXPECT_EQ(error([](auto& o) { o.temporal.forgetting = 2; }).rfind("light::", 0), 0u);
 
   Frame s;

@@ -103,6 +103,10 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
                     static_cast<float>(node.Param("prior_z2", double{eo.prior.zonal[2]})),
                     static_cast<float>(node.Param("prior_z3", double{eo.prior.zonal[3]}))};
   po.grey_world_colour = node.Param("grey_world_colour", true);
+  po.focus.radius_m = static_cast<float>(node.Param("focus_radius", double{po.focus.radius_m}));
+  po.focus.floor = static_cast<float>(node.Param("focus_floor", double{po.focus.floor}));
+  po.uncertainty_blur =
+      static_cast<float>(node.Param("uncertainty_blur", double{po.uncertainty_blur}));
   if (!(eo.prior.weight >= 0)) {
     throw node::UsageError("scene_light: prior_weight must be >= 0, got " +
                            std::to_string(eo.prior.weight));
@@ -209,6 +213,23 @@ int Run(int argc, char** argv) {
   const bool raw_shadows = mode == "gbuffer" && po.shadow.enabled &&
                            po.shadow_geometry == light::ShadowGeometry::kDepthImage;
   light::ScenePipeline pipeline(po);  // throws LightError for bad options
+  // The inserted objects' point (the pose's parent frame, fusion's world) and the camera poses
+  // that carry it into each frame's camera frame.
+  const std::vector<double> focus = node.Param("focus", std::vector<double>{});
+  if (!focus.empty() && focus.size() != 3) {
+    throw node::UsageError("scene_light: focus must be [x, y, z] in metres (or empty), got " +
+                           std::to_string(focus.size()) + " values");
+  }
+  std::optional<bus::Subscriber> pose_sub;
+  if (!focus.empty()) {
+    pose_sub.emplace(node.CreateSubscriber<msgs::Pose>("scene/pose", {.queue_depth = 8}));
+  }
+  std::deque<msgs::Pose> poses;  // the latest camera poses, oldest first
+  int64_t focus_used = 0, focus_missing = 0;
+  auto hold_pose = [&](bus::Sample&& s) {
+    poses.push_back(*msgs::ReadMessage<msgs::Pose>(s.data()));
+    if (poses.size() > 8) poses.pop_front();
+  };
 
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
   bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
@@ -406,12 +427,42 @@ int Run(int argc, char** argv) {
       // Depth images up to this G_r's stamp can match no later G_r.
       std::erase_if(raw_depths, [&](const HeldDepth& d) { return d.stamp_ns <= header.stamp_ns; });
     }
+    if (pose_sub) {
+      // The pose of this frame (fusion publishes it before its G_r), else the newest older one.
+      while (auto s = pose_sub->TryTake()) {
+        const bus::MessageInfo received = s->info();
+        hold_pose(std::move(*s));
+        node.Ack(*pose_sub, received);
+      }
+      const msgs::Pose* pose = nullptr;
+      for (const msgs::Pose& p : poses) {
+        if (p.header.stamp_ns <= header.stamp_ns) pose = &p;
+      }
+      if (pose != nullptr) {
+        frame.focus = light::WorldPointInCamera(pose->transform, {focus[0], focus[1], focus[2]});
+        ++focus_used;
+      } else {
+        if (focus_missing == 0) {
+          node.Warn() << "no scene/pose up to stamp " << header.stamp_ns
+                      << ": frames without one are fitted without the focus";
+        }
+        ++focus_missing;
+      }
+    }
     const light::ScenePipelineResult& r = pipeline.Process(frame);
     const light::LightEstimate& e = r.light;
     if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
       const auto& p = r.point.lamps[0].position;
       node.Debug() << "frame " << header.sequence << ": point model, lamp at (" << p[0] << ", "
                    << p[1] << ", " << p[2] << ") m, camera frame";
+    }
+    if (r.shadow_ran) {
+      const light::ShadowEstimate& sh = r.shadow;
+      node.Debug() << "stamp " << header.stamp_ns << ": shadow search "
+                   << (sh.valid ? "accepted" : "rejected") << ", score " << sh.score
+                   << " (unshadowed " << sh.score_unshadowed << ", runner-up " << sh.runner_up
+                   << "), contrast " << sh.contrast << ", " << sh.groups << " groups, direction ("
+                   << sh.direction[0] << ", " << sh.direction[1] << ", " << sh.direction[2] << ")";
     }
     ++frames;
     if (e.valid) {
@@ -470,6 +521,7 @@ int Run(int argc, char** argv) {
       {&image_sub, [&](bus::Sample&& s) { image.emplace(std::move(s)); }},
       {&trigger_sub, process}};
   if (raw_depth_sub) handlers.push_back({&*raw_depth_sub, hold_depth});
+  if (pose_sub) handlers.push_back({&*pose_sub, hold_pose});
   // Views that arrive while no G_r is being processed (e.g. before camera_info) are taken and
   // acked by Spin too, so lock-step replay never waits on an unacked view.
   if (aux_sub) handlers.push_back({&*aux_sub, hold_aux});
@@ -478,6 +530,9 @@ int Run(int argc, char** argv) {
   if (raw_shadows) {
     node.Info() << "shadow search on the frame's depth image for " << raw_used
                 << " frames, on G_r for " << raw_missing;
+  }
+  if (pose_sub) {
+    node.Info() << "focus: used for " << focus_used << " frames, no pose for " << focus_missing;
   }
   if (use_aux) {
     node.Info() << "auxiliary views: used for " << aux_used << " frames, missing for "

@@ -44,7 +44,7 @@ namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
     "usage: composite_eval --scenes DIR [--only NAME,...] [--mode gbuffer|depth] --json OUT "
-    "[--sheets DIR] [--light-param NAME:=VALUE]...";
+    "[--sheets DIR] [--light-param NAME:=VALUE]... [--no-focus] [--keep-work]";
 constexpr int kProxyStride = 6;  // px between the scene proxy's vertices (2.5-4 cm at 2-3 m)
 
 struct UsageError : std::runtime_error {
@@ -60,6 +60,9 @@ struct Options {
   std::string scenes, json, sheets, mode = "gbuffer";
   std::vector<std::string> only;
   std::vector<std::string> light_params;  // scene_light param overrides (NAME:=VALUE)
+  // scene_light's focus: the objects' centre, as a live graph passes its renderer's placement.
+  bool focus = true;
+  bool keep_work = false;  // keep the work folder (logs of every node, the MCAP sources)
 };
 
 Options ParseOptions(int argc, char** argv) {
@@ -95,6 +98,10 @@ Options ParseOptions(int argc, char** argv) {
                          rule + "'");
       }
       o.light_params.push_back(rule);
+    } else if (a == "--keep-work") {
+      o.keep_work = true;
+    } else if (a == "--no-focus") {
+      o.focus = false;
     } else if (a == "-h" || a == "--help") {
       std::cout << kUsage << "\n";
       std::exit(0);
@@ -421,9 +428,20 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
                            Fixed(volume.origin[1]) + ", " + Fixed(volume.origin[2]) + "]",
                        "truncation:=" + Fixed(volume.truncation),
                        "depth_max:=" + Fixed(volume.depth_max)};
-  if (!options.light_params.empty()) {  // node args: a --ros-args section before the launch's own
+  std::vector<std::string> light_params = options.light_params;
+  if (options.focus && !scene.objects.empty()) {
+    // The mean of the objects' centres in fusion's world (the frame of /scene/pose).
+    std::array<double, 3> centre = {0, 0, 0};
+    for (const eval::InsertedObject& object : scene.objects) {
+      const std::array<double, 3> p = fusion_from_truth.Apply(object.position);
+      for (int c = 0; c < 3; ++c) centre[c] += p[c] / static_cast<double>(scene.objects.size());
+    }
+    light_params.insert(light_params.begin(), "focus:=[" + Fixed(centre[0]) + "," +
+                                                  Fixed(centre[1]) + "," + Fixed(centre[2]) + "]");
+  }
+  if (!light_params.empty()) {  // node args: a --ros-args section before the launch's own
     std::string light_args = "light_args:=--ros-args";
-    for (const std::string& rule : options.light_params) light_args += " -p " + rule;
+    for (const std::string& rule : light_params) light_args += " -p " + rule;
     graph.launch_args.push_back(light_args + " --");
   }
   ::setenv("PROBELESS_LOG_DIR", (dir / "log").string().c_str(), 1);
@@ -670,7 +688,8 @@ int Run(int argc, char** argv) {
   ::sigaction(SIGTERM, &action, nullptr);
   // A scene that fails is reported and skipped: the other scenes' results are still written.
   std::vector<std::string> failed;
-  bool keep_work = false;
+  bool keep_work = options.keep_work;
+  if (keep_work) std::cerr << "composite_eval: work folder " << work.string() << " (kept)\n";
   for (size_t k = 0; k < scenes.size(); ++k) {
     if (composite_eval::StopRequested()) {
       std::cerr << "composite_eval: interrupted\n";

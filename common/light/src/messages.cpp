@@ -158,6 +158,28 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
   }
 }
 
+std::array<float, 3> WorldPointInCamera(const msgs::RigidTransform& camera_to_world,
+                                        const std::array<double, 3>& world) {
+  const msgs::Quaternion& q = camera_to_world.rotation;
+  const double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+  if (!(n > 0) || !std::isfinite(n)) {
+    throw LightError("light::WorldPointInCamera: the camera's rotation quaternion has norm " +
+                     std::to_string(n) + ", expected a finite non-zero norm");
+  }
+  const double w = q.w / n, x = q.x / n, y = q.y / n, z = q.z / n;
+  // Row-major R (camera -> world) of the unit quaternion.
+  const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+                       2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                       2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+  const msgs::Vector3& t = camera_to_world.translation;
+  const double d[3] = {world[0] - t.x, world[1] - t.y, world[2] - t.z};
+  std::array<float, 3> out{};
+  for (int c = 0; c < 3; ++c) {
+    out[c] = static_cast<float>(r[0 * 3 + c] * d[0] + r[1 * 3 + c] * d[1] + r[2 * 3 + c] * d[2]);
+  }
+  return out;
+}
+
 void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale) {
   out->bands = static_cast<uint32_t>(std::min(e.bands, static_cast<int>(msgs::kMaxShBands)));
   for (uint32_t n = 0; n < msgs::kMaxShCoefficients; ++n) {

@@ -77,6 +77,14 @@ void Validate(const ScenePipelineOptions& o) {
     throw LightError(what + "depth_geometry.step must be -1 (by the noise) or >= 1, got " +
                      std::to_string(o.depth_geometry.step));
   }
+  if (!(o.focus.radius_m >= 0) || !(o.focus.floor >= 0 && o.focus.floor <= 1)) {
+    throw LightError(what + "focus.radius_m must be >= 0 and focus.floor in [0, 1], got " +
+                     std::to_string(o.focus.radius_m) + " and " + std::to_string(o.focus.floor));
+  }
+  if (!(o.uncertainty_blur >= 0)) {
+    throw LightError(what + "uncertainty_blur must be >= 0, got " +
+                     std::to_string(o.uncertainty_blur));
+  }
   if (o.depth_geometry.smooth_radius < -1) {
     throw LightError(what + "depth_geometry.smooth_radius must be -1 (by the noise) or >= 0, got " +
                      std::to_string(o.depth_geometry.smooth_radius));
@@ -120,6 +128,7 @@ struct ScenePipeline::State {
   int64_t last_stamp = std::numeric_limits<int64_t>::min();
   // Per-frame buffers (reused).
   std::vector<float> depth, normals, reliability;   // the fit's geometry
+  std::vector<float> row_weights;                   // reliability x focus weights
   std::vector<float> shadow_depth, shadow_normals;  // the shadow search's depth image
   TransferResult transfer;
   ScenePipelineResult result;
@@ -231,10 +240,30 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     ro.noise_quadratic = o.depth_geometry.smoothed_noise_quadratic;
     NormalReliability(view.depth, w, h, f.intrinsics, view.normals, ro, &s.reliability);
   }
-  const std::span<const float> weights =
+  std::span<const float> weights =
       o.reliability_weights ? std::span<const float>(s.reliability) : std::span<const float>();
   r.geometry = view;
   r.reliability = weights;
+  if (f.focus && o.focus.radius_m > 0) {
+    // Rows near the inserted object count most (FocusOptions).
+    s.row_weights.assign(pixels, 0.0f);
+    const float inv = 1.0f / (2 * o.focus.radius_m * o.focus.radius_m);
+    const auto& c = *f.focus;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x;
+        const float z = view.depth[i];
+        if (!(z > 0)) continue;
+        float p[3];
+        f.intrinsics.BackProject(x, y, z, p);
+        const float d2 = (p[0] - c[0]) * (p[0] - c[0]) + (p[1] - c[1]) * (p[1] - c[1]) +
+                         (p[2] - c[2]) * (p[2] - c[2]);
+        const float wf = o.focus.floor + (1 - o.focus.floor) * std::exp(-d2 * inv);
+        s.row_weights[i] = weights.empty() ? wf : wf * weights[i];
+      }
+    }
+    weights = s.row_weights;
+  }
   // The shadow search's geometry: the fit's, or the frame's own depth image (shadow_geometry).
   const bool temporal = o.temporal.frames > 1;
   const bool shadows = o.shadow.enabled && !temporal;
@@ -340,7 +369,7 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     if (shadows && r.light.valid) shadow_search(&r.light);
   } else {
     SceneLightResult scene = EstimateSceneLight(view, s.transfer, f.grey, s.scene, f.colour,
-                                                o.point_warm_start ? &s.tracker : nullptr);
+                                                o.point_warm_start ? &s.tracker : nullptr, weights);
     r.used = scene.used;
     r.distant = std::move(scene.distant);
     r.point = std::move(scene.point);
@@ -363,6 +392,14 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   }
   if (r.light.valid) {
     r.light.confidence = static_cast<float>(s.confidence.Apply(r.light.confidence));
+    if (o.uncertainty_blur > 0 && !s.confidence.identity()) {
+      const double e = ExpectedErrorFromConfidence(r.light.confidence) * std::numbers::pi / 180;
+      const double sigma = o.uncertainty_blur * e / std::sqrt(2 * std::log(2.0));
+      for (size_t k = 1; k < r.light.coefficients.size(); ++k) {
+        const int l = static_cast<int>(std::sqrt(static_cast<double>(k)));  // band of k
+        r.light.coefficients[k] *= std::exp(-0.5 * l * (l + 1) * sigma * sigma);
+      }
+    }
   }
   r.timings.cpu_ms_estimate = ThreadCpuMs() - cpu_estimate;
   r.timings.ms_estimate = MsSince(t_estimate);

@@ -934,9 +934,10 @@ double ThreadCpuMs() {
 SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult& transfer,
                                     std::span<const float> intensity,
                                     const SceneLightOptions& options,
-                                    std::span<const uint8_t> colour, PointLightTracker* tracker) {
+                                    std::span<const uint8_t> colour, PointLightTracker* tracker,
+                                    std::span<const float> distant_weights) {
   SceneLightResult out;
-  out.distant = EstimateLight(transfer, intensity, options.distant, colour);
+  out.distant = EstimateLight(transfer, intensity, options.distant, colour, distant_weights);
   out.light = out.distant;
   out.used = LightModel::kDistant;
   // Cast shadows refine the distant light only (parallel shadow rays); `distant` stays the fit's.

@@ -4,6 +4,7 @@
 // msgs::MessageError with one line.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <span>
 #include <vector>
@@ -13,6 +14,7 @@
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/auxiliary_views.h"
 #include "probeless/msgs/camera_info.h"
+#include "probeless/msgs/geometry.h"
 #include "probeless/msgs/geometry_buffer.h"
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/sh_light.h"
@@ -64,6 +66,12 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
 // same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,
 // confidence; units msgs::ShLightUnits::kLinear (the estimate is in the image's linear units).
 void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale = 1.0f);
+
+// The point `world` (metres, in camera_to_world's parent frame) in the camera frame of
+// `camera_to_world` (child -> parent, msgs::Pose::transform): R^T (world - t), R of the
+// normalised quaternion. Throws LightError for a quaternion of norm 0 or not finite.
+std::array<float, 3> WorldPointInCamera(const msgs::RigidTransform& camera_to_world,
+                                        const std::array<double, 3>& world);
 
 // Writes the one-bounce indirect buffer of `result` (TransferResult::indirect, eq. 10-12: linear
 // RGB radiance towards the camera for albedo 1, 0 where no surface) into `out` as an rgb32f image

@@ -53,6 +53,17 @@ enum class ShadowGeometry {
   kGeometryBuffer,  // always the G-buffer
 };
 
+// The fit's rows weighted by their distance to the point where virtual objects stand
+// (SceneFrame::focus): the composite needs the light at the inserted object, and indoors the light
+// varies across the room (a sun patch on the table, a lamp's fall-off, a dark corner), so the
+// surfaces near the object say more about it than the far walls. Row weight
+// floor + (1 - floor) exp(-d^2 / (2 radius^2)), d the pixel's 3D distance to the focus (metres).
+// The defaults were chosen on the evaluation world's validation split (docs/light.md "Focus").
+struct FocusOptions {
+  float radius_m = 0.5f;  // the kernel's sigma in metres; 0 = off (every row weighs the same)
+  float floor = 0.1f;     // weight far from the focus, in [0, 1]: keeps the room's other normals
+};
+
 // Every option of the node and the evaluation; the defaults are the node's (docs/nodes.md,
 // scene_light) for subsample 1.
 struct ScenePipelineOptions {
@@ -128,6 +139,19 @@ struct ScenePipelineOptions {
   // confidence itself.
   std::optional<std::vector<double>> confidence_knots;
 
+  // Row weights by the distance to SceneFrame::focus (the distant fits, also the shadow search's
+  // prior-free seed; not the point model, whose rows carry the lamp's position themselves).
+  FocusOptions focus;
+
+  // The published light as the expected light under its own direction uncertainty: with the
+  // calibrated confidence's expected error e (confidence_knots; off while they are empty), band l
+  // of the light is scaled by exp(-l (l + 1) sigma^2 / 2), the SH convolution with a spherical
+  // Gaussian of angular spread sigma = uncertainty_blur x e / sqrt(2 ln 2) (a Rayleigh-
+  // distributed angle whose median is e). A light whose direction is a guess then shades softly,
+  // as the average over the directions it may be, instead of confidently from one wrong side.
+  // 0 = off; the direction, confidence and intensity stay the fit's.
+  float uncertainty_blur = 0;
+
   // The one-bounce indirect buffer (eq. 10-12) from the previous frame's dominant light: in the
   // result's transfer from the second frame on (none after a frame without a light).
   bool indirect = false;
@@ -160,6 +184,10 @@ struct SceneFrame {
   // frame's, the temporal fit rotates its history into this frame (d_now = R_now^T R_prev d_prev);
   // without it the camera is taken as not rotating.
   std::optional<std::array<double, 9>> camera_to_world_rotation;
+  // Optional point where virtual objects are inserted (camera frame of this frame, metres):
+  // ScenePipelineOptions::focus weights the fit's rows by their distance to it. Unset: no
+  // weighting.
+  std::optional<std::array<float, 3>> focus;
 };
 
 // Per-frame timings (milliseconds).

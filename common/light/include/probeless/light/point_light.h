@@ -171,12 +171,14 @@ struct SceneLightResult {
 // EstimateLight, then (model kPoint / kAuto, and the distant fit had enough pixels) the point fit
 // initialised from its dominant direction; kPoint uses the point estimate when it is valid, kAuto
 // when PointLightEstimate::prefers_point. `tracker` (optional, one per stream): warm starts of
-// the point fit across frames, reset when the point model is not used. Throws LightError as
-// EstimateLight and EstimatePointLight.
+// the point fit across frames, reset when the point model is not used. `distant_weights`
+// (optional, width * height): the distant fit's row weights (EstimateLight's `reliability`).
+// Throws LightError as EstimateLight and EstimatePointLight.
 SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult& transfer,
                                     std::span<const float> intensity,
                                     const SceneLightOptions& options,
                                     std::span<const uint8_t> colour = {},
-                                    PointLightTracker* tracker = nullptr);
+                                    PointLightTracker* tracker = nullptr,
+                                    std::span<const float> distant_weights = {});
 
 }  // namespace probeless::light
