@@ -207,6 +207,68 @@ TEST(Differential, SphereShadowFallsAwayFromTheLight) {
   EXPECT_GT(away, 4 * towards);
 }
 
+// The sun's crisp shadow (sun_shadow): the same sphere and lamp as above; the wall points whose
+// ray towards the lamp hits the sphere get the lamp's share taken away, up to the analytic edge.
+TEST(Differential, SunShadowIsCrispWhereTheRayHitsTheSphere) {
+  const raytrace::Mesh sphere = raytrace::MakeSphere(0.15f, 64);
+  const Wall wall;
+  const double a = 0.15;
+  const sh::Vec3 c{0, 0, kWallZ - a};
+  render::RasterObject o{&sphere, At(c[0], c[1], c[2]), {0.7f, 0.7f, 0.7f}, true};
+  render::VirtualGeometry g;
+  render::RasteriseObjects(wall.View(), {&o, 1}, &g);
+  const double s = std::sqrt(0.5);
+  const sh::Vec3 d{s, 0, -s};
+  // On the wall (x, 0, 2) the hard shadow spans x in [-0.15 - a / s, -0.15 + a / s]; the sphere
+  // hides it right of x = -0.162.
+  const double edge = -0.15 - a / s;
+  render::DifferentialOptions options;
+  options.tone = render::DifferentialTone::kRatio;
+  render::DifferentialFrame f;
+  f.real = wall.View();
+  f.with_virtual = &g;
+  f.light = Light(0.2, d, 0.7 / s * std::numbers::pi);
+  f.dominant = {{static_cast<float>(d[0]), 0.0f, static_cast<float>(d[2])}, 1.0f};
+  f.camera_tone = {render::ToneOperator::kClamp, 1, 4};
+  f.objects = {&o, 1};
+  render::DifferentialResult soft, crisp;
+  render::DifferentialRenderer(options).Compute(f, &soft);
+  options.sun_shadow = true;
+  render::DifferentialRenderer(options).Compute(f, &crisp);
+  // The lamp's amplitude recovered from the light's own bands 1 and 2-3.
+  EXPECT_NEAR(crisp.sun_amplitude[0], 0.7 / s * std::numbers::pi,
+              0.01 * 0.7 / s * std::numbers::pi);
+  EXPECT_GT(crisp.sun_shadow_pixels, 500);
+  auto at = [&](const render::DifferentialResult& r, double x) {
+    return Factor(r, wall.Pixel(x, 0));
+  };
+  // Inside: only the ambient 0.2 of about 0.9 is left (0.22, a little less for the contact
+  // occlusion of the rest by SSDO); the soft SH shadow alone keeps much more.
+  EXPECT_LT(at(crisp, -0.26), 0.3);
+  EXPECT_GT(at(soft, -0.26), at(crisp, -0.26) + 0.2);
+  // Crisp: 2 cm inside the edge still dark, 2 cm outside lit.
+  EXPECT_LT(at(crisp, edge + 0.02), 0.3);
+  EXPECT_GT(at(crisp, edge - 0.02), 0.97);
+  // The lit side: the sphere blocks none of the lamp there, so what the SH lobe's SSDO occlusion
+  // took from it comes back.
+  EXPECT_GE(at(crisp, 0.3), at(soft, 0.3));
+  EXPECT_GT(at(crisp, 0.3), 0.97);
+
+  // A smooth light (ambient and a band-1 gradient, nothing above): no delta, no crisp shadow, the
+  // same result as without sun_shadow.
+  render::ShLightRgb smooth = Light(0.5, d, 0);
+  for (int ch = 0; ch < 3; ++ch) smooth.coefficients[3][ch] = 0.3f;
+  f.light = smooth;
+  render::DifferentialResult off, on;
+  options.sun_shadow = false;
+  render::DifferentialRenderer(options).Compute(f, &off);
+  options.sun_shadow = true;
+  render::DifferentialRenderer(options).Compute(f, &on);
+  EXPECT_EQ(on.sun_amplitude[0], 0.0f);
+  EXPECT_EQ(on.factor, off.factor);
+  EXPECT_EQ(on.window.x0, off.window.x0);
+}
+
 // A red virtual box against the white wall, lit from the right: its lit +x face bounces red light
 // onto the wall to its right (eq. 10-12 in R'_i, eq. 14-15), nothing onto the unlit left side.
 TEST(Differential, RedBoxTintsTheWhiteWall) {
@@ -546,6 +608,14 @@ TEST(Differential, Errors) {
   bad.step = 0;
   EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(bad); }),
             "differential: step must be >= 1, got 0");
+  render::DifferentialOptions fixed_sun;
+  fixed_sun.sun_shadow = true;
+  EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(fixed_sun); }),
+            "differential: sun_shadow needs tone ratio (the crisp shadow divides R'_d by R_d)");
+  fixed_sun.tone = render::DifferentialTone::kRatio;
+  fixed_sun.sun_map_size = 8;
+  EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(fixed_sun); }),
+            "differential: sun_map_size must be in 16..4096, got 8");
   render::DifferentialRenderer renderer({});
   render::DifferentialFrame f;
   f.real = wall.View();

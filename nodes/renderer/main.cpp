@@ -29,7 +29,8 @@
 // head rasterised at the head pose | mesh: the baked receiver, face mode's default), ssdo_radius
 // (0.3 m scene, 0.1 m face), ssdo_directions, ssdo_bands, ssdo_seed,
 // ssdo_threads, differential_step, differential_smooth, differential_tone (ratio | fixed | key),
-// differential_key, indirect,
+// differential_key, indirect, sun_shadow (with differential_tone ratio: the crisp cast shadow of
+// the light's directional part, render::DifferentialOptions::sun_shadow),
 // object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there). Exit: 0 on
 // shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's X display
 // goes away (one line on stderr).
@@ -135,6 +136,10 @@ int Run(int argc, char** argv) {
                       : diff_tone == "ratio" ? render::DifferentialTone::kRatio
                                              : render::DifferentialTone::kFixed;
   diff_options.key = static_cast<float>(node.Param("differential_key", 0.18));
+  // The crisp shadow divides by R_d: only with the ratio tone (an explicit true with another tone
+  // is the RenderError of DifferentialRenderer).
+  diff_options.sun_shadow =
+      node.Param("sun_shadow", diff_options.tone == render::DifferentialTone::kRatio);
   diff_options.indirect = node.Param("indirect", true);
   // A bake with scene_mesh (scene mode) or the proxy head (face mode) as occluder already has the
   // real scene's shadows on the objects.
@@ -296,6 +301,7 @@ int Run(int argc, char** argv) {
       df.dominant = DominantOf(light_msg);
       df.camera_tone = renderer.tone_mapping();
       df.camera_rgb = camera_rgb;
+      df.objects = raster;
       differential->Compute(df, &diff_result);
       camera_diff = camera_rgb;
       render::ApplyDifferential(diff_result, width, height, camera_diff);
@@ -311,8 +317,9 @@ int Run(int argc, char** argv) {
       ++diff_frames;
       node.Debug() << "differential: window " << diff_result.window.width() << "x"
                    << diff_result.window.height() << ", " << diff_result.changed_pixels
-                   << " pixels changed, smallest factor " << diff_result.min_factor << ", "
-                   << diff_result.ms_total << " ms";
+                   << " pixels changed, smallest factor " << diff_result.min_factor << ", sun "
+                   << diff_result.sun_amplitude[0] << " over " << diff_result.sun_shadow_pixels
+                   << " pixels, " << diff_result.ms_total << " ms";
     } else if (differential && !face_differential && !have_gbuffer && !real_depth.empty() &&
                !warned_size) {
       node.Warn() << "scene/gbuffer is not the camera image's size (or has no normals): no "

@@ -15,6 +15,7 @@
 // See docs/render.md ("Differential rendering from G_r").
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -117,6 +118,20 @@ struct DifferentialOptions {
   // had the real scene as occluder) and its bounce light onto them (R'_i - R_v,i).
   bool virtual_occlusion = true;
   bool virtual_bounce = true;
+  // The crisp cast shadow of the light's directional part (needs tone kRatio and
+  // DifferentialFrame::objects): a sun or a spot lamp is a delta in direction, which an SH light
+  // of 3-4 bands and SSDO's radius turn into a soft contact shadow. The light is split into
+  // L_sun = a Y(d) (d the frame's dominant direction; a per channel the amplitude of the
+  // delta pattern Y(d) in bands 2 and up and in band 1, the smaller of the two: a smooth sky
+  // gradient has band 1 but no higher bands, so it gets no crisp shadow) and the rest. The rest
+  // keeps the SSDO of eq. 13; the sun's part is seen through the objects' visibility V along d
+  // (an orthographic depth map of their triangles along d, 3 x 3 percentage-closer filtered) at
+  // every real pixel, not only in the SSDO window:
+  //   factor = (T' L - T' L_sun + V T L_sun) / (T L)
+  // (in the SSDO window; outside it T' = T, unoccluded analytic transfer).
+  bool sun_shadow = false;
+  int sun_map_size = 512;     // texels per side of the depth map along d
+  float sun_bias_m = 0.004f;  // a receiver is shadowed by a surface more than this nearer the sun
 };
 
 // One frame's input. `real` and `with_virtual` must have the same size and intrinsics.
@@ -131,6 +146,9 @@ struct DifferentialFrame {
   // The camera image I_c (3 sRGB bytes per pixel): the albedo of a real pixel for I_i is
   // I_c / T(R_d) (clamped to [0, 1]); empty = albedo 1.
   std::span<const uint8_t> camera_rgb;
+  // The objects of with_virtual (as given to RasteriseObjects): the occluders of
+  // DifferentialOptions::sun_shadow (empty: no crisp shadow).
+  std::span<const RasterObject> objects;
 };
 
 // The result on the window: per pixel of `window` (row-major within it), the factor of eq. 13
@@ -149,6 +167,10 @@ struct DifferentialResult {
   std::vector<float> virtual_modulation;
   std::vector<float> virtual_indirect;
   double ms_transfer = 0;  // wall time of the SSDO buffers (R_d, R'_d with R_i, R'_i, R_v)
+  // sun_shadow: the directional part's amplitude a (RGB; 0 = no crisp shadow this frame) and the
+  // real pixels with visibility V < 1.
+  std::array<float, 3> sun_amplitude{0, 0, 0};
+  int sun_shadow_pixels = 0;
   // Window pixels whose factor is not 1 or whose I_i is not 0, and the smallest factor (red).
   int changed_pixels = 0;
   float min_factor = 1;
@@ -193,6 +215,8 @@ class DifferentialRenderer {
   std::vector<float> virtual_depth_;  // G_r' depth with the real pixels removed (R_v)
   std::vector<uint8_t> virtual_mask_;
   light::TransferResult virtual_with_, virtual_only_;
+  std::vector<float> sun_map_;         // the objects' largest coordinate along d per texel
+  std::vector<float> sun_visibility_;  // V per pixel (1 = lit), sun_shadow
 };
 
 // Applies `result` to the camera image in place (width x height x 3 sRGB bytes): c = sRGB(lin(c) *
