@@ -89,6 +89,20 @@ TEST(ClientQueueTest, ControlOverflowMarksTheClient) {
   EXPECT_FALSE(q.Pop());
 }
 
+TEST(ClientQueueTest, OnlyTheLatestTimeFrameWaits) {
+  ClientQueue q({.max_messages = 1, .max_control = 3});
+  q.PushControl("a", false);
+  for (uint64_t t = 1; t <= 100; ++t) q.PushTime(TimeFrame(t));
+  EXPECT_FALSE(q.Overflowed());
+  EXPECT_EQ(q.Pop()->bytes, "a");
+  auto f = q.Pop();
+  ASSERT_TRUE(f);
+  EXPECT_EQ(f->bytes, TimeFrame(100));
+  EXPECT_FALSE(q.Pop());
+  q.PushTime(TimeFrame(101));  // a new one after the queued one was sent
+  EXPECT_EQ(q.Pop()->bytes, TimeFrame(101));
+}
+
 TEST(ClientQueueTest, BadLimits) {
   try {
     ClientQueue q({.max_messages = 0});

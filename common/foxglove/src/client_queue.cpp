@@ -23,6 +23,22 @@ void ClientQueue::PushControl(std::string bytes, bool binary) {
   control_.push_back(std::move(f));
 }
 
+void ClientQueue::PushTime(std::string frame) {
+  {
+    std::lock_guard lock(mutex_);
+    if (time_queued_) {
+      for (OutgoingFrame& f : control_) {
+        if (f.kind == OutgoingFrame::Kind::kBinary) {
+          f.bytes = std::move(frame);
+          return;
+        }
+      }
+    }
+    time_queued_ = true;
+  }
+  PushControl(std::move(frame), true);
+}
+
 size_t ClientQueue::PushData(uint32_t subscription_id,
                              std::shared_ptr<const EncodedMessage> message) {
   std::lock_guard lock(mutex_);
@@ -69,6 +85,7 @@ std::optional<OutgoingFrame> ClientQueue::Pop() {
   if (!control_.empty()) {
     OutgoingFrame f = std::move(control_.front());
     control_.pop_front();
+    if (f.kind == OutgoingFrame::Kind::kBinary) time_queued_ = false;
     return f;
   }
   if (data_.empty()) return std::nullopt;

@@ -231,7 +231,7 @@ void Hub::BroadcastTime(uint64_t timestamp_ns) {
     std::lock_guard lock(mutex_);
     const std::string frame = TimeFrame(timestamp_ns);
     for (auto& [id, c] : clients_) {
-      c->queue.PushControl(frame, true);
+      c->queue.PushTime(frame);
       touched.push_back(id);
     }
   }

@@ -54,6 +54,9 @@ class ClientQueue {
   // Appends a control frame (text or binary). Beyond max_control queued, nothing is added and
   // Overflowed() turns true.
   void PushControl(std::string bytes, bool binary);
+  // Queues a time frame, replacing one still queued (only the latest server time matters), so a
+  // client that stops reading for a while is not disconnected for unread clock ticks.
+  void PushTime(std::string frame);
   // Appends a messageData entry; drops the oldest entry of the same subscription while it has
   // max_messages queued, then the oldest entries while the bytes would exceed max_bytes (the new
   // one is always kept). Returns how many were dropped.
@@ -80,6 +83,7 @@ class ClientQueue {
   const QueueLimits limits_;
   mutable std::mutex mutex_;
   std::deque<OutgoingFrame> control_;
+  bool time_queued_ = false;  // control_ holds a time frame (the only binary control frames)
   std::deque<Data> data_;
   std::map<uint32_t, size_t> queued_by_subscription_;
   size_t data_bytes_ = 0;
