@@ -78,7 +78,8 @@ PySample Wrap(bus::Sample sample, SubscriberState& state) {
   return PySample{std::move(storage), state.type};
 }
 
-// Blocks until a sample, the timeout or shutdown (checked every node::kShutdownPollPeriod).
+// Blocks until a sample, the timeout or shutdown (checked every node::kShutdownPollPeriod);
+// without a Node's handlers a signal Python handles (SIGINT: KeyboardInterrupt) raises.
 std::optional<PySample> Take(SubscriberState& state, const std::optional<double>& timeout) {
   const auto deadline = std::chrono::steady_clock::now() + TimeoutOf(timeout);
   std::optional<bus::Sample> sample;
@@ -89,8 +90,15 @@ std::optional<PySample> Take(SubscriberState& state, const std::optional<double>
       const auto wait = std::max<std::chrono::nanoseconds>(
           std::chrono::nanoseconds(0),
           std::min<std::chrono::nanoseconds>(remaining, node::kShutdownPollPeriod));
-      std::lock_guard lock(*state.mutex);
-      sample = state.Get().Take(wait);
+      {
+        std::lock_guard lock(*state.mutex);
+        sample = state.Get().Take(wait);
+      }
+      if (!sample) {
+        // Python's own handlers (a script without a Node): Ctrl-C raises KeyboardInterrupt.
+        py::gil_scoped_acquire locked;
+        if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+      }
     } while (!sample && node::ok() && std::chrono::steady_clock::now() < deadline);
   }
   if (!sample) return std::nullopt;

@@ -144,3 +144,22 @@ def test_iterating_a_subscriber_until_shutdown_with_explicit_acks(tmp_path, proc
             assert ack.msg.publish_sequence == sequence
     assert child.stop(signal.SIGTERM) == 0
     assert "bands [1, 2, 3]" in child.stdout
+
+
+def test_ctrl_c_interrupts_a_take_without_a_node(tmp_path, processes):
+    script = tmp_path / "bare.py"
+    script.write_text(textwrap.dedent("""
+        import probeless
+        from probeless import msgs
+
+        sub = probeless.Subscriber("/bare", msgs.ShLight)
+        print("ready", flush=True)
+        try:
+            sub.take()                      # no timeout, Python's own SIGINT handler
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+    """))
+    child = processes(python_script(script))
+    assert child.popen.stdout.readline().strip() == "ready"
+    assert child.stop(signal.SIGINT, timeout=5) == 0
+    assert "interrupted" in child.stdout
