@@ -305,6 +305,13 @@ async function main() {
   });
   check(refused, "a handshake without a Foxglove subprotocol is refused");
 
+  // A second bridge on the same port: one line, exit 2.
+  const second = spawnSync(`${bin}/foxglove_bridge`, ["--ros-args", "-p", `port:=${port}`],
+                           { encoding: "utf8", timeout: 10000 });
+  check(second.status === 2 &&
+        second.stderr.trim() === `[error] [foxglove_bridge] cannot listen on 127.0.0.1:${port}: Address already in use`,
+        `a port in use: exit ${second.status}, "${second.stderr.trim()}"`);
+
   a.client.close();
   const code = await stop(bridge);
   check(code === 0, `the bridge exits 0 on SIGINT (${code})`);
