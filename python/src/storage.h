@@ -175,7 +175,7 @@ struct MessageType {
   uint64_t layout_hash = 0;
   size_t struct_bytes = 0;
   bool has_payload = false;
-  py::object cls;  // the Python class
+  py::handle cls;  // the Python class (kept alive by the module: no reference held at exit)
   // The Python message object over a whole message in `storage` (throws MessageError if the
   // bytes are fewer than the struct).
   std::function<py::object(std::shared_ptr<Storage>)> wrap;
