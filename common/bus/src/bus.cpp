@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <bit>
 #include <cassert>
 #include <cctype>
@@ -16,11 +17,6 @@
 namespace probeless::bus {
 namespace internal {
 namespace {
-
-constexpr size_t kMaxMessageBytes = size_t{1} << 30;
-constexpr uint32_t kMaxSlots = 1024;
-
-size_t AlignUp(size_t v, size_t a) { return (v + a - 1) / a * a; }
 
 std::atomic<uint32_t> g_publisher_counter{0};
 
@@ -94,7 +90,7 @@ struct PublisherImpl {
     RobustLock topic_lock(&ctrl->mutex);
     RobustLock history_lock(&header->history_mutex);
     std::vector<std::unique_ptr<RobustLock>> sub_locks;
-    std::vector<uint32_t> counts(header->slot_count, 0);
+    std::vector<uint32_t> counts(mapping->slot_count, 0);
     auto count = [&](const QueueEntry& e) {
       if (e.pub_index == index && e.pub_generation == generation && e.slot < counts.size()) {
         counts[e.slot] += 1;
@@ -112,7 +108,7 @@ struct PublisherImpl {
       counts[header->history_slots[(header->history_head + i) % kMaxHistory]] += 1;
     }
     uint32_t repaired = 0;
-    for (uint32_t s = 0; s < header->slot_count; ++s) {
+    for (uint32_t s = 0; s < mapping->slot_count; ++s) {
       auto& refs = Slot(s)->refs;
       const uint32_t before = refs.load();
       const uint32_t after = (before & kLoanBit) | counts[s];
@@ -143,6 +139,18 @@ struct SubscriberImpl {
   std::shared_ptr<TopicHandle> topic;
   uint32_t index = 0;
   SubscriberEntry* entry = nullptr;
+  uint64_t rejected = 0;
+  std::string last_rejection;
+
+  // Records a message dropped because its publisher's slot, pool or queue entry is invalid.
+  void Reject(uint32_t pub_index, const std::string& why) {
+    ++rejected;
+    const std::string from =
+        pub_index < kMaxPublishersPerTopic
+            ? "publisher pid " + std::to_string(topic->ctrl()->publishers[pub_index].owner.pid)
+            : std::string("an unknown publisher");
+    last_rejection = "topic '" + topic->topic() + "': message of " + from + " dropped: " + why;
+  }
 
   // Releases held[held_index] (a Sample's slot).
   void Release(uint32_t held_index) {
@@ -338,6 +346,9 @@ Publisher::Publisher(std::string_view topic, const TopicType& type,
   impl->header->owner = self;
   impl->header->history = options.history;
   internal::InitRobustMutex(&impl->header->history_mutex);
+  impl->mapping->slot_count = options.slot_count;
+  impl->mapping->capacity = impl->capacity;
+  impl->mapping->stride = stride;
 
   try {
     impl->topic = TopicHandle::Join(domain, topic, [&](TopicHandle& handle) {
@@ -397,7 +408,7 @@ Loan Publisher::Borrow(size_t bytes) {
                    " bytes exceeds the publisher's max_message_bytes of " +
                    std::to_string(impl.capacity));
   }
-  const uint32_t slots = impl.header->slot_count;
+  const uint32_t slots = impl.mapping->slot_count;
   // Bounded: every round either finds a slot or removes one queue reference of ours.
   const int max_rounds = 2 + static_cast<int>(kMaxSubscribersPerTopic * kMaxQueueDepth);
   for (int round = 0; round < max_rounds; ++round) {
@@ -574,8 +585,9 @@ Subscriber::Subscriber(std::string_view topic, const TopicType& type,
       e.dropped.store(0);
       for (const auto& source : sources) {
         auto* h = TopicHandle::Header(*source.mapping);
-        for (uint32_t i = 0; i < h->history_count; ++i) {
+        for (uint32_t i = 0; i < std::min(h->history_count, kMaxHistory); ++i) {
           const uint32_t slot = h->history_slots[(h->history_head + i) % kMaxHistory];
+          if (slot >= source.mapping->slot_count) continue;  // a corrupt history entry
           TopicHandle::Slot(*source.mapping, slot)->refs.fetch_add(1, std::memory_order_acq_rel);
           if (e.count == e.depth) {
             const QueueEntry oldest = e.ring[e.head];
@@ -628,15 +640,41 @@ std::optional<Sample> Subscriber::TryTake() {
       OrderStores();
       e.held_mask |= 1u << held_index;
     }
-    auto mapping = impl.topic->PublisherMapping(ref.pub_index, ref.pub_generation);
-    if (!mapping) {
-      // Its publisher crashed and was reclaimed: the message is gone. Count it as dropped.
+    std::string why;
+    auto mapping = impl.topic->PublisherMapping(ref.pub_index, ref.pub_generation, &why);
+    if (!mapping || ref.slot >= mapping->slot_count) {
+      // Its publisher crashed and was reclaimed (the message is gone), or a faulty publisher's
+      // pool or queue entry is invalid: dropped, without touching the slot.
       RobustLock lock(&e.mutex);
       e.held_mask &= ~(1u << held_index);
       e.dropped.fetch_add(1, std::memory_order_relaxed);
+      if (mapping) {
+        why = "a queue entry names slot " + std::to_string(ref.slot) + " of a pool of " +
+              std::to_string(mapping->slot_count);
+      }
+      if (!why.empty()) impl.Reject(ref.pub_index, why);
       continue;
     }
     const internal::SlotHeader* slot = TopicHandle::Slot(*mapping, ref.slot);
+    if ((slot->refs.load(std::memory_order_acquire) & ~internal::kLoanBit) == 0) {
+      // The entry's own reference is missing: it names a slot nobody published to us.
+      RobustLock lock(&e.mutex);
+      e.held_mask &= ~(1u << held_index);
+      e.dropped.fetch_add(1, std::memory_order_relaxed);
+      impl.Reject(ref.pub_index, "a queue entry names slot " + std::to_string(ref.slot) +
+                                     ", which holds no reference");
+      continue;
+    }
+    // Read once: the publisher may write the header again at any time.
+    const uint32_t size = *static_cast<const volatile uint32_t*>(&slot->size);
+    if (size > mapping->capacity) {
+      impl.Release(held_index);
+      e.dropped.fetch_add(1, std::memory_order_relaxed);
+      impl.Reject(ref.pub_index, "slot " + std::to_string(ref.slot) + " says " +
+                                     std::to_string(size) + " payload bytes, its capacity is " +
+                                     std::to_string(mapping->capacity));
+      continue;
+    }
     Sample sample;
     sample.owner_ = impl_;
     sample.held_index_ = held_index;
@@ -644,7 +682,7 @@ std::optional<Sample> Subscriber::TryTake() {
     sample.info_.sequence = slot->sequence;
     sample.info_.publish_mono_ns = slot->publish_mono_ns;
     sample.info_.publish_wall_ns = slot->publish_wall_ns;
-    sample.info_.size = slot->size;
+    sample.info_.size = size;
     sample.info_.publisher_pid = TopicHandle::Header(*mapping)->owner.pid;
     sample.info_.publisher_index = ref.pub_index;
     sample.mapping_ = std::move(mapping);
@@ -669,6 +707,10 @@ std::optional<Sample> Subscriber::Take(std::chrono::nanoseconds timeout) {
 }
 
 uint64_t Subscriber::dropped() const { return impl_->entry->dropped.load(); }
+
+uint64_t Subscriber::rejected() const { return impl_->rejected; }
+
+const std::string& Subscriber::last_rejection() const { return impl_->last_rejection; }
 
 uint32_t Subscriber::queued() const {
   RobustLock lock(&impl_->entry->mutex);

@@ -34,6 +34,13 @@ class Mapping {
   std::byte* base() const { return static_cast<std::byte*>(base_); }
   size_t bytes() const { return bytes_; }
 
+  // A publisher pool's geometry, validated against the mapped size when the pool was created or
+  // mapped (TopicHandle::AdoptPoolGeometry); slots are located with these, never with the pool
+  // header's live fields, which a faulty or hostile publisher may overwrite at any time.
+  uint32_t slot_count = 0;
+  uint64_t capacity = 0;  // payload bytes per slot
+  uint64_t stride = 0;    // bytes per slot, SlotHeader included
+
  private:
   void* base_;
   size_t bytes_;

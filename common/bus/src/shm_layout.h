@@ -32,6 +32,8 @@ inline constexpr uint32_t kLoanBit = 1u << 31;
 inline constexpr size_t kSlotHeaderBytes = 64;
 inline constexpr size_t kSegmentNameBytes = 192;
 inline constexpr size_t kTextBytes = kMaxNameLength + 4;
+inline constexpr uint32_t kMaxSlots = 1024;                  // slots per publisher pool
+inline constexpr size_t kMaxMessageBytes = size_t{1} << 30;  // payload bytes per slot
 
 // Identity of a process: pid plus its start time (clock ticks since boot, /proc/<pid>/stat field
 // 22), so a recycled pid is not mistaken for the original process.
@@ -166,6 +168,8 @@ struct alignas(64) PublisherHeader {
   uint32_t history_count;
   uint32_t history_slots[kMaxHistory];
 };
+
+inline size_t AlignUp(size_t v, size_t a) { return (v + a - 1) / a * a; }
 
 inline size_t SlotsOffset() { return (sizeof(PublisherHeader) + 4095) / 4096 * 4096; }
 

@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cassert>
 #include <cinttypes>
 #include <cstdio>
@@ -111,13 +112,44 @@ PublisherHeader* TopicHandle::Header(const Mapping& mapping) {
 }
 
 SlotHeader* TopicHandle::Slot(const Mapping& mapping, uint32_t slot) {
-  const PublisherHeader* header = Header(mapping);
-  assert(slot < header->slot_count);
-  return reinterpret_cast<SlotHeader*>(mapping.base() + SlotsOffset() + slot * header->stride);
+  assert(slot < mapping.slot_count);
+  return reinterpret_cast<SlotHeader*>(mapping.base() + SlotsOffset() + slot * mapping.stride);
 }
 
-std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t generation) {
-  assert(index < kMaxPublishersPerTopic);
+std::string TopicHandle::AdoptPoolGeometry(Mapping& mapping) {
+  if (mapping.bytes() < SlotsOffset()) {
+    return "its pool segment has " + std::to_string(mapping.bytes()) + " bytes, less than a header";
+  }
+  const PublisherHeader* h = Header(mapping);
+  // One read of each field: the header may change under us.
+  const uint64_t magic = *static_cast<const volatile uint64_t*>(&h->magic);
+  const uint32_t version = *static_cast<const volatile uint32_t*>(&h->version);
+  const uint32_t slot_count = *static_cast<const volatile uint32_t*>(&h->slot_count);
+  const uint64_t capacity = *static_cast<const volatile uint64_t*>(&h->capacity);
+  const uint64_t stride = *static_cast<const volatile uint64_t*>(&h->stride);
+  if (magic != kPublisherMagic || version != kLayoutVersion) {
+    return "its pool segment is not a publisher pool of layout version " +
+           std::to_string(kLayoutVersion);
+  }
+  if (slot_count == 0 || slot_count > kMaxSlots || capacity == 0 || capacity > kMaxMessageBytes ||
+      stride != AlignUp(kSlotHeaderBytes + capacity, 64) ||
+      (mapping.bytes() - SlotsOffset()) / stride < slot_count) {
+    return "its pool header says " + std::to_string(slot_count) + " slots of " +
+           std::to_string(capacity) + " bytes (stride " + std::to_string(stride) +
+           "), which is not a pool of its " + std::to_string(mapping.bytes()) + "-byte segment";
+  }
+  mapping.slot_count = slot_count;
+  mapping.capacity = capacity;
+  mapping.stride = stride;
+  return "";
+}
+
+std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t generation,
+                                                       std::string* why) {
+  if (index >= kMaxPublishersPerTopic) {
+    if (why != nullptr) *why = "a queue entry names publisher " + std::to_string(index);
+    return nullptr;
+  }
   {
     std::lock_guard<std::mutex> guard(cache_mutex_);
     if (cache_[index].mapping && cache_[index].generation == generation) {
@@ -136,7 +168,12 @@ std::shared_ptr<Mapping> TopicHandle::PublisherMapping(uint32_t index, uint32_t 
   const size_t bytes = entry.segment_bytes;
   if (!current()) return nullptr;  // the entry was reused while we read it
   std::shared_ptr<Mapping> mapping = OpenSegment(segment, bytes);
-  if (!mapping || Header(*mapping)->magic != kPublisherMagic) return nullptr;
+  if (!mapping) return nullptr;
+  const std::string invalid = AdoptPoolGeometry(*mapping);
+  if (!invalid.empty()) {
+    if (why != nullptr) *why = invalid;
+    return nullptr;
+  }
   std::lock_guard<std::mutex> guard(cache_mutex_);
   cache_[index] = {generation, mapping};
   return mapping;
@@ -146,6 +183,7 @@ void TopicHandle::DecRef(const QueueEntry& entry) {
   if (IsTombstone(entry)) return;
   auto mapping = PublisherMapping(entry.pub_index, entry.pub_generation);
   if (!mapping) return;  // its publisher is gone (purged or reclaimed): nothing to release
+  if (entry.slot >= mapping->slot_count) return;  // a corrupt entry names no slot of the pool
   SlotHeader* slot = Slot(*mapping, entry.slot);
   const uint32_t before = slot->refs.fetch_sub(1, std::memory_order_acq_rel);
   assert((before & ~kLoanBit) != 0 && "slot reference count underflow");
@@ -198,15 +236,17 @@ void TopicHandle::RetirePublisherLocked(uint32_t index, bool crashed) {
     PublisherHeader* header = Header(*mapping);
     {
       RobustLock lock(&header->history_mutex);
-      for (uint32_t i = 0; i < header->history_count; ++i) {
+      for (uint32_t i = 0; i < std::min(header->history_count, kMaxHistory); ++i) {
         const uint32_t slot = header->history_slots[(header->history_head + i) % kMaxHistory];
-        Slot(*mapping, slot)->refs.fetch_sub(1, std::memory_order_acq_rel);
+        if (slot < mapping->slot_count) {
+          Slot(*mapping, slot)->refs.fetch_sub(1, std::memory_order_acq_rel);
+        }
       }
       header->history_count = 0;
     }
     if (crashed) {
       // Loans its owner never published or returned.
-      for (uint32_t s = 0; s < header->slot_count; ++s) {
+      for (uint32_t s = 0; s < mapping->slot_count; ++s) {
         auto& refs = Slot(*mapping, s)->refs;
         if (refs.load() & kLoanBit) refs.fetch_and(~kLoanBit, std::memory_order_acq_rel);
       }

@@ -45,7 +45,15 @@ class TopicHandle {
   // The mapping of publisher `index` at `generation`, or nullptr if that publisher is gone. Takes
   // no shared-memory lock (the entry is read seqlock-style, validated by its generation), so it may
   // be called under any bus lock.
-  std::shared_ptr<Mapping> PublisherMapping(uint32_t index, uint32_t generation);
+  // A pool whose header does not describe a valid pool inside the mapping (a faulty or hostile
+  // publisher) is not mapped either: nullptr, and `why` (when given) says what was wrong.
+  std::shared_ptr<Mapping> PublisherMapping(uint32_t index, uint32_t generation,
+                                            std::string* why = nullptr);
+  // Validates the pool header of `mapping` (magic, version, slot count, capacity, stride, all
+  // slots inside the mapping) and records its geometry in the mapping. Returns "" or the reason.
+  static std::string AdoptPoolGeometry(Mapping& mapping);
+  // The slot at `slot` (< mapping.slot_count, checked by the callers that read the index from
+  // shared memory), by the mapping's validated geometry.
   static SlotHeader* Slot(const Mapping& mapping, uint32_t slot);
   static PublisherHeader* Header(const Mapping& mapping);
 

@@ -205,8 +205,17 @@ class Subscriber {
   // Blocks until a message is queued or `timeout` passes (nullopt then).
   std::optional<Sample> Take(std::chrono::nanoseconds timeout);
 
-  // Messages this subscriber lost to drop-oldest so far.
+  // Messages this subscriber lost to drop-oldest so far (and those rejected, below).
   uint64_t dropped() const;
+  // Messages this subscriber object dropped because their publisher broke the pool's contract (a
+  // faulty or hostile process writing the shared memory): a slot size beyond the slot capacity, a
+  // pool header that does not describe a pool inside its segment, a queue entry naming no slot.
+  // Such a message is never handed out (a Sample's bytes always lie inside its slot); it counts in
+  // dropped() too. last_rejection() is the latest one's line, "topic '/t': message of publisher
+  // pid N dropped: <what was wrong>" ("of an unknown publisher" for an entry naming none; "" if
+  // none was rejected).
+  uint64_t rejected() const;
+  const std::string& last_rejection() const;
   // Messages currently queued for this subscriber.
   uint32_t queued() const;
   // Number of live publishers registered on the topic (dead ones not yet reclaimed excluded).
