@@ -16,6 +16,7 @@
 //   image_reliability, image_depth, image_durability   sensor_msgs/Image QoS (best_effort, 2, volatile)
 //   qos (string array, [])          per-topic rules "REGEX=reliability,depth,durability"
 //   bus_queue_depth (int, 2)        bus queue per forwarded topic (drop-oldest, counted)
+//   bus_slot_count (int, 8)         bus publisher slots per topic received from DDS (2..1024)
 //   stats_period_s (double, 5)      log a stats line per topic this often (0: only at exit)
 // At exit prints on stdout one line per topic
 //   <bus topic> -> <dds topic> | <dds topic> -> <bus topic>: forwarded=N dropped=D errors=E bytes=B
@@ -95,6 +96,12 @@ int Run(int argc, char** argv) {
     throw std::invalid_argument("bus_queue_depth " + std::to_string(queue) + " out of range (1..64)");
   }
   o.bus_queue_depth = static_cast<uint32_t>(queue);
+  const int64_t slots = node.Param<int64_t>("bus_slot_count", 8);
+  if (slots < 2 || slots > 1024) {
+    throw std::invalid_argument("bus_slot_count " + std::to_string(slots) +
+                                " out of range (2..1024)");
+  }
+  o.bus_slot_count = static_cast<uint32_t>(slots);
   const double stats_period = node.Param("stats_period_s", 5.0);
   for (const std::string& unused : node.UnusedParamOverrides()) {
     node.Warn() << "unknown parameter '" << unused << "' ignored";

@@ -364,8 +364,10 @@ TEST(DdsBridge, PlainCycloneWriterReachesTheBus) {
     o.queue_depth = 8;
     return bus::Subscriber("/robot/image", msgs::TopicTypeOf<msgs::Image>(), o);
   }();
-  Process bridge_b("dds_bridge", {"--ros-args", "-p", "from_dds:=[/ros/image:=/robot/image]", "-p",
-                                  "domain_id:=" + std::to_string(dds), "-p", "stats_period_s:=0"});
+  Process bridge_b("dds_bridge",
+                   {"--ros-args", "-p", "from_dds:=[/ros/image:=/robot/image]", "-p",
+                    "domain_id:=" + std::to_string(dds), "-p", "stats_period_s:=0", "-p",
+                    "bus_slot_count:=12"});
 
   const std::string config = dds_bridge::CycloneConfig(dds_bridge::BridgeOptions{});
   const dds_entity_t domain = dds_create_domain(static_cast<dds_domainid_t>(dds), config.c_str());
@@ -409,8 +411,29 @@ TEST(DdsBridge, PlainCycloneWriterReachesTheBus) {
   EXPECT_EQ(image->header.stamp_ns, 1'700'000'000'250'000'000);
   ASSERT_EQ(got->data().size(), sizeof(msgs::Image) + pixels.size());
   EXPECT_EQ(std::memcmp(got->data().data() + sizeof(msgs::Image), pixels.data(), pixels.size()), 0);
+  // The bridge's bus pool has the bus_slot_count param's slots.
+  uint32_t slots = 0;
+  for (const bus::TopicSnapshot& t : bus::ListTopics(b)) {
+    if (t.topic != "/robot/image") continue;
+    for (const bus::PublisherSnapshot& p : t.publishers) {
+      if (p.alive) slots = p.slot_count;
+    }
+  }
+  EXPECT_EQ(slots, 12u);
   got.reset();
   dds_delete(domain);
+}
+
+TEST(DdsBridge, BusSlotCountOutOfRangeIsABadParam) {
+  UseBusDomain(BusDomain("s", 'b'));
+  for (const char* value : {"1", "1025"}) {
+    Process bridge("dds_bridge", {"--ros-args", "-p", "from_dds:=[/ros/image]", "-p",
+                                  std::string("bus_slot_count:=") + value});
+    EXPECT_EQ(bridge.Wait(), 2) << bridge.Err();
+    EXPECT_NE(bridge.Err().find(std::string("bus_slot_count ") + value + " out of range (2..1024)"),
+              std::string::npos)
+        << bridge.Err();
+  }
 }
 
 TEST(DdsBridge, KilledBridgeRestartsAndFlowResumes) {

@@ -316,6 +316,10 @@ struct Bridge::Impl {
       throw DdsBridgeError("bus_queue_depth " + std::to_string(options.bus_queue_depth) +
                            " out of range (1.." + std::to_string(bus::kMaxQueueDepth) + ")");
     }
+    if (options.bus_slot_count < 2 || options.bus_slot_count > 1024) {  // the bus's pool limits
+      throw DdsBridgeError("bus_slot_count " + std::to_string(options.bus_slot_count) +
+                           " out of range (2..1024)");
+    }
     for (const Route& r : options.from_dds) inbound_bus_topics.insert(r.to);
 
     const std::string config = CycloneConfig(options);

@@ -92,7 +92,8 @@ struct BridgeOptions {
 
   // Bus subscriber queue depth (drop-oldest beyond it) for topics sent to DDS.
   uint32_t bus_queue_depth = 2;
-  // Bus publisher slots for topics received from DDS.
+  // Bus publisher slots for topics received from DDS (2..1024): messages of one topic that bus
+  // subscribers may hold or have queued at once before the oldest queued one is dropped.
   uint32_t bus_slot_count = 8;
   // How often the bus topic list and DDS publications are rescanned.
   double rescan_period_s = 0.25;
