@@ -195,7 +195,9 @@ int main(int argc, char** argv) {
     render::DifferentialResult g_result;
     std::vector<uint8_t> g_camera;
     double g_transfer_ms = 0, g_raster_ms = 0, g_total_ms = 0;
-    int g_changed = 0;
+    int g_changed = 0, g_sun_pixels = 0;
+    bool g_sun = false;   // the crisp sun shadow (DifferentialOptions::sun_shadow) on
+    bool g_side = false;  // the dominant light from the side (its shadow in view)
     auto coherent_frame = [&](render::DifferentialRenderer& dr) {
       render::RasterObject o{&ball.mesh.mesh, ball.object_to_anchor, {0.8f, 0.1f, 0.1f}, true};
       const auto t_raster = Clock::now();
@@ -208,7 +210,11 @@ int main(int argc, char** argv) {
       df.dominant = {{0, -0.7f, -0.7f}, 2.0f};
       df.camera_tone = renderer.tone_mapping();
       df.camera_rgb = camera;
+      // A lamp from the right, above and behind the ball: its shadow falls on the floor in view.
+      if (g_side) df.dominant = {{0.70f, -0.59f, 0.40f}, 2.0f};
+      if (g_sun) df.objects = {&o, 1};
       dr.Compute(df, &g_result);
+      g_sun_pixels = g_result.sun_shadow_pixels;
       g_camera = camera;
       render::ApplyDifferential(g_result, kW, kH, g_camera);
       render::FrameInputs gin = in;
@@ -219,10 +225,14 @@ int main(int argc, char** argv) {
       g_total_ms = g_result.ms_total;
       g_changed = g_result.changed_pixels;
     };
-    auto run_coherent = [&](int step, double* transfer_ms, double* raster_ms, double* diff_ms) {
+    auto run_coherent = [&](int step, double* transfer_ms, double* raster_ms, double* diff_ms,
+                            bool sun = false, bool side = false) {
       render::DifferentialOptions o;
       o.tone = render::DifferentialTone::kRatio;
       o.step = step;
+      o.sun_shadow = sun;
+      g_sun = sun;
+      g_side = side;
       render::DifferentialRenderer dr(o);
       renderer.SetReceiverVisible(receiver_index, false);
       renderer.SetObjectVisible(0, false);
@@ -255,6 +265,14 @@ int main(int argc, char** argv) {
     const int coherent_changed = g_changed;
     const std::vector<double> coherent_fast =
         run_coherent(2, &coherent_fast_transfer_ms, &fast_raster_ms, &fast_diff_ms);
+    // The same side light without and with the crisp sun shadow.
+    double side_transfer_ms = 0, side_raster_ms = 0, side_diff_ms = 0;
+    const std::vector<double> coherent_side =
+        run_coherent(2, &side_transfer_ms, &side_raster_ms, &side_diff_ms, false, /*side=*/true);
+    double sun_transfer_ms = 0, sun_raster_ms = 0, sun_diff_ms = 0;
+    const std::vector<double> coherent_sun =
+        run_coherent(2, &sun_transfer_ms, &sun_raster_ms, &sun_diff_ms, /*sun=*/true, true);
+    const int sun_pixels = g_sun_pixels;
     size_t covered = 0;
     for (uint8_t c : out.coverage) covered += c;
 
@@ -350,6 +368,9 @@ int main(int argc, char** argv) {
         "\"frame_ms_gbuffer_step2_p50\": %.3f, \"transfer_ms_gbuffer_step2_p50\": %.3f, "
         "\"raster_ms_gbuffer_p50\": %.3f, \"differential_ms_gbuffer_p50\": %.3f, "
         "\"differential_ms_gbuffer_step2_p50\": %.3f, "
+        "\"differential_ms_gbuffer_step2_side_p50\": %.3f, "
+        "\"frame_ms_gbuffer_step2_sun_p50\": %.3f, \"differential_ms_gbuffer_step2_sun_p50\": "
+        "%.3f, \"sun_shadow_pixels\": %d, "
         "\"latency_gbuffer_ms_p50\": %.3f, \"latency_gbuffer_ms_p95\": %.3f, "
         "\"lp_num_threads\": \"%s\"}",
         backend.c_str(), renderer.gl_version().c_str(), renderer.gl_renderer().c_str(), kW, kH,
@@ -361,7 +382,8 @@ int main(int argc, char** argv) {
         Percentile(latency_diff, 0.5), Percentile(latency_diff, 0.95), coherent_window,
         coherent_changed, Percentile(coherent, 0.5), Percentile(coherent, 0.95),
         coherent_transfer_ms, Percentile(coherent_fast, 0.5), coherent_fast_transfer_ms,
-        fast_raster_ms, diff_ms, fast_diff_ms, Percentile(latency_coherent, 0.5),
+        fast_raster_ms, diff_ms, fast_diff_ms, side_diff_ms, Percentile(coherent_sun, 0.5),
+        sun_diff_ms, sun_pixels, Percentile(latency_coherent, 0.5),
         Percentile(latency_coherent, 0.95),
         std::getenv("LP_NUM_THREADS") ? std::getenv("LP_NUM_THREADS") : "default");
     std::printf("%s\n", buffer);

@@ -88,15 +88,19 @@ struct SunMap {
   float u0 = 0, v0 = 0, texel = 1;
   int n = 0;
   std::vector<float>* t = nullptr;
+  std::vector<Vec3> uvt_;
 
   void Build(std::span<const RasterObject> objects, int size, std::vector<float>* storage) {
     e1 = Normalize(Cross(d, std::abs(d.x) < 0.9f ? Vec3{1, 0, 0} : Vec3{0, 1, 0}));
     e2 = Cross(d, e1);
     float lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    // Every vertex once: (u, v, t) = (p.e1, p.e2, p.d), p in the camera frame.
+    uvt_.clear();
     for (const RasterObject& o : objects) {
       for (const Vec3& q : o.mesh->positions) {
         const Vec3 p = o.object_to_camera.Apply(q);
         const float u = Dot(p, e1), v = Dot(p, e2);
+        uvt_.push_back({u, v, Dot(p, d)});
         lo[0] = std::min(lo[0], u), hi[0] = std::max(hi[0], u);
         lo[1] = std::min(lo[1], v), hi[1] = std::max(hi[1], v);
       }
@@ -106,15 +110,17 @@ struct SunMap {
     u0 = lo[0] - 2 * texel, v0 = lo[1] - 2 * texel;  // a margin of two texels
     t = storage;
     t->assign(static_cast<size_t>(n) * n, -INFINITY);
+    const float inv_texel = 1 / texel;
+    size_t base = 0;
     for (const RasterObject& o : objects) {
       const raytrace::Mesh& m = *o.mesh;
       for (const auto& tri : m.triangles) {
         float pu[3], pv[3], pt[3];
         for (int i = 0; i < 3; ++i) {
-          const Vec3 p = o.object_to_camera.Apply(m.positions[tri[i]]);
-          pu[i] = (Dot(p, e1) - u0) / texel - 0.5f;  // texel centres at integers
-          pv[i] = (Dot(p, e2) - v0) / texel - 0.5f;
-          pt[i] = Dot(p, d);
+          const Vec3& q = uvt_[base + tri[i]];
+          pu[i] = (q.x - u0) * inv_texel - 0.5f;  // texel centres at integers
+          pv[i] = (q.y - v0) * inv_texel - 0.5f;
+          pt[i] = q.z;
         }
         const float area = (pu[1] - pu[0]) * (pv[2] - pv[0]) - (pu[2] - pu[0]) * (pv[1] - pv[0]);
         if (std::abs(area) < 1e-12f) continue;
@@ -137,6 +143,7 @@ struct SunMap {
           }
         }
       }
+      base += m.positions.size();
     }
   }
 
@@ -392,21 +399,38 @@ void DifferentialRenderer::Compute(const DifferentialFrame& f, DifferentialResul
       map.Build(f.objects, options_.sun_map_size, &sun_map_);
       const float bias = options_.sun_bias_m + 2 * map.texel;
       sun_visibility_.assign(pixels, 1.0f);
+      // V of real pixel (u, v) facing d; 1 elsewhere.
+      auto visibility = [&](int u, int v) {
+        const size_t p = static_cast<size_t>(v) * w + u;
+        const float z = f.real.depth[p];
+        if (gv->object_id[p] != 0 || !(z > 0)) return 1.0f;
+        const float* n = &f.real.normals[3 * p];
+        if (n[0] * d.x + n[1] * d.y + n[2] * d.z <= 0) return 1.0f;  // the sun is behind it
+        float x[3];
+        f.real.intrinsics.BackProject(u, v, z, x);
+        return map.Visibility({x[0], x[1], x[2]}, bias);
+      };
+      // Every 2nd pixel finds the shadow's bounding box (dilated by 2), then every pixel in it.
       int x0 = w, y0 = h, x1 = -1, y1 = -1;
-      for (int v = 0; v < h; ++v) {
-        for (int u = 0; u < w; ++u) {
-          const size_t p = static_cast<size_t>(v) * w + u;
-          const float z = f.real.depth[p];
-          if (gv->object_id[p] != 0 || !(z > 0)) continue;
-          const float* n = &f.real.normals[3 * p];
-          if (n[0] * d.x + n[1] * d.y + n[2] * d.z <= 0) continue;  // the sun is behind it
-          float x[3];
-          f.real.intrinsics.BackProject(u, v, z, x);
-          const float vis = map.Visibility({x[0], x[1], x[2]}, bias);
-          if (vis >= 1) continue;
-          sun_visibility_[p] = vis;
-          ++out->sun_shadow_pixels;
+      for (int v = 0; v < h; v += 2) {
+        for (int u = 0; u < w; u += 2) {
+          if (visibility(u, v) >= 1) continue;
           x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
+        }
+      }
+      if (x1 >= 0) {
+        x0 = std::max(0, x0 - 2), y0 = std::max(0, y0 - 2);
+        x1 = std::min(w - 1, x1 + 2), y1 = std::min(h - 1, y1 + 2);
+        const int bx0 = x0, by0 = y0, bx1 = x1, by1 = y1;
+        x0 = w, y0 = h, x1 = -1, y1 = -1;
+        for (int v = by0; v <= by1; ++v) {
+          for (int u = bx0; u <= bx1; ++u) {
+            const float vis = visibility(u, v);
+            if (vis >= 1) continue;
+            sun_visibility_[static_cast<size_t>(v) * w + u] = vis;
+            ++out->sun_shadow_pixels;
+            x0 = std::min(x0, u), x1 = std::max(x1, u), y0 = std::min(y0, v), y1 = std::max(y1, v);
+          }
         }
       }
       if (out->sun_shadow_pixels > 0) shadow_rect = {x0, y0, x1 + 1, y1 + 1};

@@ -130,7 +130,7 @@ struct DifferentialOptions {
   //   factor = (T' L - T' L_sun + V T L_sun) / (T L)
   // (in the SSDO window; outside it T' = T, unoccluded analytic transfer).
   bool sun_shadow = false;
-  int sun_map_size = 512;     // texels per side of the depth map along d
+  int sun_map_size = 256;     // texels per side of the depth map along d
   float sun_bias_m = 0.004f;  // a receiver is shadowed by a surface more than this nearer the sun
 };
 
