@@ -7,9 +7,10 @@
 // Params: address ("127.0.0.1"), port (8765), topics ([]: with topic_regex empty, every topic),
 // topic_regex (""), exclude (""), jpeg_topics ([/render/composite, /camera/image]), jpeg_quality
 // (80), client_queue_depth (10 messages), client_queue_mb (64), send_buffer_mb (4),
-// bus_queue_depth (4), rescan_period_s (0.25), time_period_s (0.1), stats_period_s (5; 0: only
-// at exit). Every param is served read-only to clients as "<node>.<param>".
-// At exit prints on stdout one line per channel and per bus topic:
+// bus_queue_depth (4), rescan_period_s (0.25), time_period_s (0.1), clock_topic ("": the wall
+// clock; "/clock": a replay's time, as use_sim_time), stats_period_s (5; 0: only at exit). Every
+// param is served read-only to clients as "<node>.<param>". At exit prints on stdout one line per
+// channel and per bus topic:
 //   channel <id> <topic>: messages=N bytes=B dropped=D subscribers=S
 //   bus <topic>: received=N dropped=D errors=E
 // Exit status: 0 after SIGINT/SIGTERM; 2 for bad params or an address that cannot be bound.
@@ -75,6 +76,9 @@ int Run(int argc, char** argv) {
       IntParam(node, "bus_queue_depth", 4, 1, probeless::bus::kMaxQueueDepth));
   o.rescan_period_s = node.Param("rescan_period_s", 0.25);
   o.time_period_s = node.Param("time_period_s", 0.1);
+  if (const std::string clock = node.Param("clock_topic", ""); !clock.empty()) {
+    o.clock_topic = node.ResolveTopicName(clock);
+  }
   const double stats_period = node.Param("stats_period_s", 5.0);
   if (!(o.rescan_period_s > 0) || !(o.time_period_s > 0) || !(stats_period >= 0)) {
     throw node::UsageError(

@@ -129,8 +129,8 @@ async function main() {
   check(port > 0, `the bridge listens on 127.0.0.1 (port ${port})`);
 
   // A client: FoxgloveClient on ws, with everything it receives recorded.
-  function connect(protocols = [FoxgloveClient.SUPPORTED_SUBPROTOCOL]) {
-    const ws = new WebSocket(`ws://127.0.0.1:${port}`, protocols);
+  function connect(protocols = [FoxgloveClient.SUPPORTED_SUBPROTOCOL], to = port) {
+    const ws = new WebSocket(`ws://127.0.0.1:${to}`, protocols);
     const client = new FoxgloveClient({ ws });
     const c = { ws, client, channels: new Map(), byId: new Map(), statuses: [], params: [],
                 times: [], messages: new Map(), info: null, closed: false };
@@ -304,6 +304,26 @@ async function main() {
     setTimeout(() => resolve(false), 5000);
   });
   check(refused, "a handshake without a Foxglove subprotocol is refused");
+
+  // A bridge on the replay's clock (clock_topic:=/clock): receive times and time frames are the
+  // log's time (this simulated log starts at 0 s; looping goes on from there), far below the wall
+  // clock's 1.7e18 ns.
+  const clocked = start(`${bin}/foxglove_bridge`, [
+    "--ros-args", "-r", "__node:=foxglove_clock", "-p", "port:=0", "-p", "clock_topic:=/clock",
+    "-p", "topics:=[/groundtruth/light]", "-p", "jpeg_topics:=[]", "-p", "stats_period_s:=0"]);
+  await waitFor(() => /listening on ws:\/\/127\.0\.0\.1:(\d+)/.test(clocked.err), 10000);
+  const clockPort = Number(/listening on ws:\/\/127\.0\.0\.1:(\d+)/.exec(clocked.err)?.[1]);
+  const k = connect(undefined, clockPort);
+  await waitFor(() => k.channels.has("/groundtruth/light"), 5000);
+  if (k.channels.has("/groundtruth/light")) k.subscribe("/groundtruth/light");
+  await waitFor(() => count(k, "/groundtruth/light") >= 10 && k.times.length >= 3, 10000);
+  const kt = (k.messages.get("/groundtruth/light") ?? []).map((m) => m.timestamp);
+  check(kt.length >= 10 && kt.every((t) => t < 1_000_000_000_000n) && k.times.length >= 3 &&
+        k.times.every((t) => t < 1_000_000_000_000n),
+        `clock_topic:=/clock: ${kt.length} receive times and ${k.times.length} time frames on the log's clock ` +
+        `(last ${Number(kt[kt.length - 1] ?? 0n) / 1e9} s)`);
+  k.client.close();
+  await stop(clocked);
 
   // A second bridge on the same port: one line, exit 2.
   const second = spawnSync(`${bin}/foxglove_bridge`, ["--ros-args", "-p", `port:=${port}`],

@@ -16,6 +16,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/foxglove/jpeg.h"
 #include "probeless/log/ros2.h"
+#include "probeless/msgs/header.h"
 #include "ws_transport.h"
 
 namespace probeless::foxglove {
@@ -64,6 +65,24 @@ struct Server::Impl {
   log::CdrWriter writer;
   std::set<std::string> warned;
   std::map<std::string, uint64_t> dropped_before;  // drops of earlier subscribers per topic
+
+  // The clock_topic subscriber and its latest stamp (bus thread).
+  std::unique_ptr<bus::Subscriber> clock;
+  uint64_t clock_ns = 0;
+  uint64_t clock_sent_ns = 0;
+
+  // The time of messages and time frames: the wall clock, or the clock topic's.
+  uint64_t NowNs() {
+    if (!clock) return RealtimeNs();
+    while (std::optional<bus::Sample> s = clock->TryTake()) {
+      try {
+        const int64_t stamp = msgs::ReadMessage<msgs::Header>(s->data())->stamp_ns;
+        if (stamp >= 0) clock_ns = static_cast<uint64_t>(stamp);
+      } catch (const msgs::MessageError&) {
+      }
+    }
+    return clock_ns;
+  }
 
   mutable std::mutex stats_mutex;
   std::map<std::string, BusTopicStats> topic_stats;
@@ -144,7 +163,7 @@ struct Server::Impl {
   }
 
   void Handle(Topic& t, const bus::Sample& sample) {
-    const uint64_t receive_ns = RealtimeNs();
+    const uint64_t receive_ns = NowNs();
     uint64_t errors = 0;
     for (const ChannelEntry& e : t.channels) {
       auto message = std::make_shared<EncodedMessage>();
@@ -198,7 +217,9 @@ struct Server::Impl {
         Resubscribe();
       }
       if (now >= next_time) {
-        hub->BroadcastTime(RealtimeNs());
+        const uint64_t t = NowNs();
+        if (!clock || t != clock_sent_ns) hub->BroadcastTime(t);
+        clock_sent_ns = t;
         next_time = now + Seconds(options.time_period_s);
       }
       const auto wait = std::clamp<std::chrono::nanoseconds>(
@@ -242,6 +263,17 @@ Server::Server(ServerOptions options) : impl_(std::make_unique<Impl>()) {
     throw FoxgloveError("rescan and time periods must be > 0 s");
   }
   if (options.domain.empty()) options.domain = bus::CurrentDomain();
+  if (!options.clock_topic.empty()) {
+    try {
+      bus::SubscriberOptions so;
+      so.queue_depth = 4;
+      so.node_name = options.node_name;
+      s.clock = std::make_unique<bus::Subscriber>(options.clock_topic,
+                                                  msgs::TopicTypeOf<msgs::Header>(), so);
+    } catch (const bus::BusError& e) {
+      throw FoxgloveError(std::string("clock topic: ") + e.what());
+    }
+  }
   s.options = std::move(options);
   HubOptions hub_options = s.options.hub;
   hub_options.wake = [&s](uint64_t client) {

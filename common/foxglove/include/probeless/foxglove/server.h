@@ -13,7 +13,10 @@
 // `probeless topic info` under the bridge's node name.
 //
 // Timestamps: messageData carries the bus receive time (CLOCK_REALTIME ns when the bridge took
-// the message); time frames every time_period carry the same clock ("time" capability).
+// the message); time frames every time_period carry the same clock ("time" capability). With a
+// clock_topic (the player's /clock, probeless_msgs/Header) the clock is instead the latest
+// stamp_ns received on it — a replayed log's own time, as ROS's use_sim_time — and a time frame
+// goes out when it advances (receive times are 0 until the first clock message).
 //
 // Network: 127.0.0.1 by default; address and port by option (port 0: a free port, see port()).
 #pragma once
@@ -44,6 +47,8 @@ struct ServerOptions {
   // Bus rescan and time frame periods, seconds (> 0).
   double rescan_period_s = 0.25;
   double time_period_s = 0.1;
+  // A probeless_msgs/Header topic whose stamp_ns is the clock (e.g. "/clock"); empty: wall clock.
+  std::string clock_topic;
   // Bus domain (default: this process's).
   std::string domain;
   // Shown by bus introspection for the bridge's subscribers.
