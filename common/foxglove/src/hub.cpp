@@ -19,9 +19,9 @@ struct Hub::Client {
 };
 
 Hub::Hub(HubOptions options) : options_(std::move(options)), table_(options_.channels) {
-  // Checks the limits once, here.
-  ClientQueue check(options_.limits);
-  (void)check;
+  // The limits are checked here, once, by a queue made for that (it throws on bad ones), not at
+  // the first Connect.
+  [[maybe_unused]] const ClientQueue check(options_.limits);
 }
 
 Hub::~Hub() = default;

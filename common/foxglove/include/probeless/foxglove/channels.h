@@ -111,7 +111,7 @@ class ChannelTable {
   std::vector<std::string> jpeg_topics_;
   std::map<uint32_t, ChannelEntry> channels_;  // current, by id
   std::map<std::string, uint32_t> ids_;        // "kind|topic|type|hash" -> id
-  std::map<std::string, std::string> warned_;  // topic -> type warned about
+  std::map<std::string, std::string> warned_;  // "topic|line" already reported -> the type
   uint32_t next_id_ = 1;
 };
 
