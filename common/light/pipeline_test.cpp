@@ -442,6 +442,47 @@ TEST(ScenePipeline, UncertaintyBlurSoftensByTheExpectedError) {
   ExpectSameLight(c, raw_sharp.Process(s.Input(1)).light);
 }
 
+TEST(ScenePipeline, FollowsALampSwitchedOffMovedAndOnWithinThreeFrames) {
+  // A stream of frames whose lamp switches (on at A, moved to B, off, on at A again): by the
+  // third frame after each switch the stream's light equals a fresh pipeline's on that frame (no
+  // state held back: warm starts, the previous light), and with the lamp off its power is gone.
+  light::ScenePipelineOptions o = SmallOptions();  // light_model auto
+  o.shadow.enabled = false;
+  const double a[3] = {-0.4, -0.2, 1.8}, b[3] = {0.6, -0.3, 1.5};
+  struct Phase {
+    const double* lamp;
+    double power;
+  };
+  const Phase phases[] = {{a, 4.0}, {b, 4.0}, {a, 0.0}, {a, 4.0}};
+  light::ScenePipeline stream(o);
+  Frame s;
+  int64_t stamp = 0;
+  float on_intensity = 0;
+  for (const Phase& phase : phases) {
+    s.LitByLamp(phase.lamp, phase.power, 0.2);
+    light::ScenePipeline fresh(o);
+    const light::LightEstimate reference = fresh.Process(s.Input(1)).light;
+    for (int k = 0; k < 3; ++k) {
+      const light::LightEstimate e = stream.Process(s.Input(++stamp)).light;
+      ASSERT_TRUE(e.valid && reference.valid) << "frame " << stamp;
+      if (k < 2) continue;  // followed by the third frame at the latest
+      if (phase.power > 0) {
+        const auto& d = e.dominant_direction;
+        const auto& r = reference.dominant_direction;
+        EXPECT_GT(d[0] * r[0] + d[1] * r[1] + d[2] * r[2], std::cos(3 * kPi / 180))
+            << "frame " << stamp;
+        EXPECT_NEAR(e.intensity, reference.intensity, 0.05 * reference.intensity)
+            << "frame " << stamp;
+        on_intensity = std::max(on_intensity, e.intensity);
+      } else {
+        // The ambient's own directional part (the room's occlusion of it) is what remains.
+        EXPECT_NEAR(e.intensity, reference.intensity, 0.02f * on_intensity) << "frame " << stamp;
+        EXPECT_LT(e.intensity, 0.25f * on_intensity) << "frame " << stamp << ": the lamp is off";
+      }
+    }
+  }
+}
+
 TEST(ScenePipeline, BadOptionsAndInput) {
   auto error = [](auto&& edit) {
     light::ScenePipelineOptions o = SmallOptions();

@@ -312,8 +312,11 @@ TEST(PointLight, ScreenKeepsTheDistantResultBitIdentical) {
     tracker.position = {0, -1, 2};
     tracker.intensity = {1};
     const auto warm = light::EstimateSceneLight(view, t, image, o, s.colour, &tracker);
-    EXPECT_FALSE(warm.point.screened_out);  // a warm stream skips the screen
+    // The warm fit is rejected, so the frame gets the cold fit (screened) a fresh stream makes.
+    EXPECT_FALSE(warm.point.warm_started);
+    EXPECT_EQ(warm.point.screened_out, screen_rows > 0) << screen_rows;
     EXPECT_EQ(warm.used, light::LightModel::kDistant);
+    EXPECT_EQ(warm.light.coefficients, distant.light.coefficients);
     EXPECT_FALSE(tracker.Active());  // reset: the next frame starts cold
     const auto r = light::EstimateSceneLight(view, t, image, o, s.colour, &tracker);
     EXPECT_EQ(r.point.screened_out, screen_rows > 0) << screen_rows;

@@ -963,8 +963,20 @@ SceneLightResult EstimateSceneLight(const GeometryView& g, const TransferResult&
   out.point =
       EstimatePointLight(g, intensity, po, bands, &transfer, colour,
                          has_direction ? &out.distant.dominant_direction : nullptr, tracker);
+  auto usable = [&] {
+    return options.model == LightModel::kPoint ? out.point.valid : out.point.prefers_point;
+  };
+  if (out.point.warm_started && !usable()) {
+    // The lamp moved or went off: a fit from the old lamp can settle where the model rule rejects
+    // it although a cold fit of this frame would not (and the next frame, cold again, would
+    // flip back), so the frame gets the cold fit a fresh stream would make.
+    tracker->Reset();
+    out.point =
+        EstimatePointLight(g, intensity, po, bands, &transfer, colour,
+                           has_direction ? &out.distant.dominant_direction : nullptr, tracker);
+  }
   out.point_thread_cpu_ms = ThreadCpuMs() - cpu0;
-  const bool use = options.model == LightModel::kPoint ? out.point.valid : out.point.prefers_point;
+  const bool use = usable();
   if (use) {
     out.light = out.point.light;
     out.used = LightModel::kPoint;
