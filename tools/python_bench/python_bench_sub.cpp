@@ -86,6 +86,10 @@ int Run(const std::string& topic, const std::string& out_path) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc == 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
+    std::printf("usage: python_bench_sub TOPIC OUT.json\n");
+    return 0;
+  }
   if (argc != 3) {
     std::fprintf(stderr, "usage: python_bench_sub TOPIC OUT.json\n");
     return 2;
