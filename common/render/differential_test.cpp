@@ -162,18 +162,36 @@ TEST(Differential, SphereOnAWallMatchesTheAnalyticOcclusion) {
   EXPECT_EQ(Factor(r, wall.Pixel(0.75, 0)), 1.0f);
 }
 
-// A lamp from the right (+x) and the camera side: the hard shadow of the sphere falls to the left;
-// the wall darkens there and hardly on the lit side (only the ambient part is occluded there).
-TEST(Differential, SphereShadowFallsAwayFromTheLight) {
-  const raytrace::Mesh sphere = raytrace::MakeSphere(0.15f, 64);
+// A sphere of radius a touching the wall, lit by a lamp from the right (+x) and the camera side at
+// 45 degrees: G_r' and the frame of the tests below.
+struct SphereBeforeWall {
+  static constexpr double a = 0.15;
+  const raytrace::Mesh sphere = raytrace::MakeSphere(static_cast<float>(a), 64);
   const Wall wall;
-  const double a = 0.15;
   const sh::Vec3 c{0, 0, kWallZ - a};
-  render::RasterObject o{&sphere, At(c[0], c[1], c[2]), {0.7f, 0.7f, 0.7f}, true};
-  render::VirtualGeometry g;
-  render::RasteriseObjects(wall.View(), {&o, 1}, &g);
+  const render::RasterObject o{&sphere, At(c[0], c[1], c[2]), {0.7f, 0.7f, 0.7f}, true};
   const double s = std::sqrt(0.5);
   const sh::Vec3 d{s, 0, -s};  // towards the light
+  render::VirtualGeometry g;
+  render::DifferentialFrame f;
+  SphereBeforeWall() {
+    render::RasteriseObjects(wall.View(), {&o, 1}, &g);
+    f.real = wall.View();
+    f.with_virtual = &g;
+    // Irradiance/pi on the open wall: ambient 0.2 + the lamp's cos 45 deg share, about 0.9 in all.
+    f.light = Light(0.2, d, 0.7 / s * std::numbers::pi);
+    f.camera_tone = {render::ToneOperator::kClamp, 1, 4};
+  }
+};
+
+// The hard shadow of the sphere falls to the left; the wall darkens there and hardly on the lit
+// side (only the ambient part is occluded there).
+TEST(Differential, SphereShadowFallsAwayFromTheLight) {
+  const SphereBeforeWall scene;
+  const Wall& wall = scene.wall;
+  const double a = scene.a;
+  const sh::Vec3& c = scene.c;
+  const sh::Vec3& d = scene.d;
   // The analytic hard shadow: does the ray from the wall point (x, 0, 2) towards d hit the sphere?
   auto shadowed = [&](double x) {
     const double v[3] = {c[0] - x, c[1], c[2] - kWallZ};
@@ -184,14 +202,8 @@ TEST(Differential, SphereShadowFallsAwayFromTheLight) {
   ASSERT_TRUE(shadowed(-0.2));
   ASSERT_FALSE(shadowed(0.2));
   render::DifferentialRenderer renderer({});
-  render::DifferentialFrame f;
-  f.real = wall.View();
-  f.with_virtual = &g;
-  // Irradiance/pi on the open wall: ambient 0.2 + the lamp's cos 45 deg share, about 0.9 in all.
-  f.light = Light(0.2, d, 0.7 / s * std::numbers::pi);
-  f.camera_tone = {render::ToneOperator::kClamp, 1, 4};
   render::DifferentialResult r;
-  renderer.Compute(f, &r);
+  renderer.Compute(scene.f, &r);
   auto mean_darkening = [&](double x) {
     double sum = 0;
     int n = 0;
@@ -210,27 +222,18 @@ TEST(Differential, SphereShadowFallsAwayFromTheLight) {
 // The sun's crisp shadow (sun_shadow): the same sphere and lamp as above; the wall points whose
 // ray towards the lamp hits the sphere get the lamp's share taken away, up to the analytic edge.
 TEST(Differential, SunShadowIsCrispWhereTheRayHitsTheSphere) {
-  const raytrace::Mesh sphere = raytrace::MakeSphere(0.15f, 64);
-  const Wall wall;
-  const double a = 0.15;
-  const sh::Vec3 c{0, 0, kWallZ - a};
-  render::RasterObject o{&sphere, At(c[0], c[1], c[2]), {0.7f, 0.7f, 0.7f}, true};
-  render::VirtualGeometry g;
-  render::RasteriseObjects(wall.View(), {&o, 1}, &g);
-  const double s = std::sqrt(0.5);
-  const sh::Vec3 d{s, 0, -s};
+  SphereBeforeWall scene;
+  const Wall& wall = scene.wall;
+  const double a = scene.a, s = scene.s;
+  const sh::Vec3& d = scene.d;
   // On the wall (x, 0, 2) the hard shadow spans x in [-0.15 - a / s, -0.15 + a / s]; the sphere
   // hides it right of x = -0.162.
   const double edge = -0.15 - a / s;
   render::DifferentialOptions options;
   options.tone = render::DifferentialTone::kRatio;
-  render::DifferentialFrame f;
-  f.real = wall.View();
-  f.with_virtual = &g;
-  f.light = Light(0.2, d, 0.7 / s * std::numbers::pi);
+  render::DifferentialFrame& f = scene.f;
   f.dominant = {{static_cast<float>(d[0]), 0.0f, static_cast<float>(d[2])}, 1.0f};
-  f.camera_tone = {render::ToneOperator::kClamp, 1, 4};
-  f.objects = {&o, 1};
+  f.objects = {&scene.o, 1};
   render::DifferentialResult soft, crisp;
   render::DifferentialRenderer(options).Compute(f, &soft);
   options.sun_shadow = true;
