@@ -382,6 +382,37 @@ TEST_F(BusTest, IntrospectionShowsParticipantsAndDrops) {
   EXPECT_TRUE(CleanDeadSegments().empty()) << "a live topic must not be cleaned";
 }
 
+TEST_F(BusTest, DownstreamDropsShowInDroppedAndIntrospection) {
+  Publisher pub("/t/downstream", kBlob, Options(32));
+  Subscriber sub("/t/downstream", kBlob, {.queue_depth = 4, .node_name = "/bridge"});
+  Subscriber other("/t/downstream", kBlob, {.queue_depth = 4, .node_name = "/other"});
+  PublishText(pub, "x");
+  ASSERT_TRUE(sub.TryTake().has_value());
+  const auto snapshot_dropped = [](const std::string& node) {
+    for (const TopicSnapshot& t : ListTopics()) {
+      for (const SubscriberSnapshot& s : t.subscribers) {
+        if (t.topic == "/t/downstream" && s.node_name == node) return s.dropped;
+      }
+    }
+    return ~uint64_t{0};
+  };
+  EXPECT_EQ(snapshot_dropped("/bridge"), 0u);
+  sub.CountDownstreamDrops(0);
+  sub.CountDownstreamDrops(3);
+  EXPECT_EQ(sub.dropped(), 3u);
+  EXPECT_EQ(snapshot_dropped("/bridge"), 3u);
+  // From another thread while this one uses the subscriber: an atomic in shared memory.
+  std::thread counter([&] {
+    for (int i = 0; i < 1000; ++i) sub.CountDownstreamDrops(2);
+  });
+  for (int i = 0; i < 100; ++i) (void)sub.queued();
+  counter.join();
+  EXPECT_EQ(sub.dropped(), 2003u);
+  EXPECT_EQ(snapshot_dropped("/bridge"), 2003u);
+  EXPECT_EQ(snapshot_dropped("/other"), 0u) << "the other subscriber of the topic is untouched";
+  EXPECT_EQ(other.dropped(), 0u);
+}
+
 TEST_F(BusTest, DomainsAreIsolated) {
   Publisher pub("/t/domain", kBlob, Options(8));
   const std::string saved = CurrentDomain();

@@ -164,11 +164,13 @@ TEST(HubTest, StalledClientDropsOnlyItsOwn) {
   hub.HandleText(stalled, sub);
   Texts(hub, fast);
   uint64_t received = 0;
+  uint64_t publish_dropped = 0;  // what Publish returns, for the bus subscriber's count
   for (uint64_t i = 0; i < 100; ++i) {
-    hub.Publish(Message(image, 10'000 * i));
+    publish_dropped += hub.Publish(Message(image, 10'000 * i));
     while (auto f = hub.Pop(fast)) received += f->kind == OutgoingFrame::Kind::kMessageData;
   }
   EXPECT_EQ(received, 100u);
+  EXPECT_EQ(publish_dropped, 97u);
   const auto clients = hub.Clients();
   EXPECT_EQ(clients[0].dropped, 0u);
   EXPECT_EQ(clients[1].dropped, 97u);

@@ -708,6 +708,10 @@ std::optional<Sample> Subscriber::Take(std::chrono::nanoseconds timeout) {
 
 uint64_t Subscriber::dropped() const { return impl_->entry->dropped.load(); }
 
+void Subscriber::CountDownstreamDrops(uint64_t n) {
+  if (n > 0) impl_->entry->dropped.fetch_add(n, std::memory_order_relaxed);
+}
+
 uint64_t Subscriber::rejected() const { return impl_->rejected; }
 
 const std::string& Subscriber::last_rejection() const { return impl_->last_rejection; }

@@ -195,12 +195,13 @@ std::vector<ChannelEntry> Hub::SubscribedChannels() const {
   return list;
 }
 
-void Hub::Publish(std::shared_ptr<const EncodedMessage> message) {
+size_t Hub::Publish(std::shared_ptr<const EncodedMessage> message) {
   std::vector<uint64_t> touched;
+  size_t dropped_total = 0;
   {
     std::lock_guard lock(mutex_);
     const auto stats = channel_stats_.find(message->channel_id);
-    if (stats == channel_stats_.end()) return;
+    if (stats == channel_stats_.end()) return 0;
     ++stats->second.messages;
     stats->second.bytes += message->payload.size();
     for (auto& [id, c] : clients_) {
@@ -208,6 +209,7 @@ void Hub::Publish(std::shared_ptr<const EncodedMessage> message) {
       if (sub == c->by_channel.end()) continue;
       const size_t dropped = c->queue.PushData(sub->second, message);
       stats->second.dropped += dropped;
+      dropped_total += dropped;
       const int64_t now = static_cast<int64_t>(message->receive_ns);
       const uint64_t total = c->queue.dropped();
       if (options_.drop_status_period_ns > 0 && total > c->dropped_reported &&
@@ -223,6 +225,7 @@ void Hub::Publish(std::shared_ptr<const EncodedMessage> message) {
     }
   }
   Wake(touched);
+  return dropped_total;
 }
 
 void Hub::BroadcastTime(uint64_t timestamp_ns) {

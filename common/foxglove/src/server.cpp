@@ -58,13 +58,17 @@ struct Server::Impl {
     bus::TopicType type;
     std::unique_ptr<bus::Subscriber> subscriber;
     std::vector<ChannelEntry> channels;
+    // Client-queue drops of its messages counted into subscriber's dropped() (so `probeless
+    // topic info` shows them); subtracted again for BusTopicStats::dropped (bus queue only).
+    uint64_t downstream_dropped = 0;
   };
   std::map<std::string, Topic> topics;  // subscribed bus topics
   std::unique_ptr<bus::WaitSet> wait_set;
   std::vector<Topic*> wait_order;  // WaitSet index -> topic
   log::CdrWriter writer;
   std::set<std::string> warned;
-  std::map<std::string, uint64_t> dropped_before;  // drops of earlier subscribers per topic
+  // Bus-queue drops of earlier subscribers per topic (client-queue drops excluded).
+  std::map<std::string, uint64_t> dropped_before;
 
   // The clock_topic subscriber and its latest stamp (bus thread).
   std::unique_ptr<bus::Subscriber> clock;
@@ -121,7 +125,7 @@ struct Server::Impl {
         ++it;
         continue;
       }
-      dropped_before[it->first] += it->second.subscriber->dropped();
+      dropped_before[it->first] += BusQueueDropped(it->second);
       Log("unsubscribed from " + it->first);
       it = topics.erase(it);
       changed = true;
@@ -186,7 +190,13 @@ struct Server::Impl {
         }
         continue;
       }
-      hub->Publish(std::move(message));
+      // Drops in the clients' queues are drops of the bridge's subscriber on this topic: counted
+      // on it at once (before the next channel's encoding), in the bus thread that owns it (the
+      // queues drop only inside Hub::Publish).
+      if (const size_t downstream = hub->Publish(std::move(message)); downstream > 0) {
+        t.subscriber->CountDownstreamDrops(downstream);
+        t.downstream_dropped += downstream;
+      }
     }
     std::lock_guard lock(stats_mutex);
     BusTopicStats& s = topic_stats[t.name];
@@ -194,11 +204,15 @@ struct Server::Impl {
     s.errors += errors;
   }
 
+  static uint64_t BusQueueDropped(const Topic& t) {
+    return t.subscriber->dropped() - t.downstream_dropped;
+  }
+
   void UpdateDropped() {
     std::lock_guard lock(stats_mutex);
     for (auto& [name, s] : topic_stats) {
       const auto t = topics.find(name);
-      s.dropped = dropped_before[name] + (t != topics.end() ? t->second.subscriber->dropped() : 0);
+      s.dropped = dropped_before[name] + (t != topics.end() ? BusQueueDropped(t->second) : 0);
     }
   }
 

@@ -205,8 +205,15 @@ class Subscriber {
   // Blocks until a message is queued or `timeout` passes (nullopt then).
   std::optional<Sample> Take(std::chrono::nanoseconds timeout);
 
-  // Messages this subscriber lost to drop-oldest so far (and those rejected, below).
+  // Messages this subscriber lost to drop-oldest so far (and those rejected, below, and those
+  // counted by CountDownstreamDrops).
   uint64_t dropped() const;
+  // Counts `n` messages this subscriber took but a downstream stage of the same process dropped
+  // (e.g. a bridge's per-client queue dropping its oldest entry): they are added to the
+  // subscriber's shared drop counter, so dropped() and introspection (`probeless topic info`,
+  // SubscriberSnapshot::dropped) include them. Thread-safe (an atomic add in shared memory): may be
+  // called from any thread, also while another one uses this subscriber.
+  void CountDownstreamDrops(uint64_t n);
   // Messages this subscriber object dropped because their publisher broke the pool's contract (a
   // faulty or hostile process writing the shared memory): a slot size beyond the slot capacity, a
   // pool header that does not describe a pool inside its segment, a queue entry naming no slot.

@@ -100,8 +100,10 @@ class Hub {
   // The channels with at least one subscriber (copies), by id.
   std::vector<ChannelEntry> SubscribedChannels() const;
   // Queues `message` for every client subscribed to its channel (each queue drops its oldest
-  // when full); counts it for the channel.
-  void Publish(std::shared_ptr<const EncodedMessage> message);
+  // when full); counts it for the channel. Returns the entries the clients' queues dropped for
+  // it (summed over clients), for the caller to count against the bus subscriber the message
+  // came from (bus::Subscriber::CountDownstreamDrops).
+  size_t Publish(std::shared_ptr<const EncodedMessage> message);
   // Queues a time frame for every client.
   void BroadcastTime(uint64_t timestamp_ns);
 

@@ -8,9 +8,11 @@
 // late-joined latched data such as camera info), and encodes each message once per channel —
 // the converter's CDR, or a JPEG CompressedImage — then hands it to the Hub, which queues it for
 // each subscribed client. The bus thread never waits for a client: a slow or stalled client only
-// drops the oldest entries of its own queue, counted per client and per channel; the bus
-// subscriber's own drops (the bridge itself falling behind) are counted per topic and show in
-// `probeless topic info` under the bridge's node name.
+// drops the oldest entries of its own queue, counted per client and per channel, and counted on
+// the bridge's bus subscriber of that topic (bus::Subscriber::CountDownstreamDrops), so
+// `probeless topic info` shows them as drops of the bridge's subscriber (under its node name),
+// together with that subscriber's own bus-queue drops (the bridge itself falling behind), which
+// BusTopicStats::dropped counts alone.
 //
 // Timestamps: messageData carries the bus receive time (CLOCK_REALTIME ns when the bridge took
 // the message); time frames every time_period carry the same clock ("time" capability). With a
@@ -62,8 +64,10 @@ struct ServerOptions {
 struct BusTopicStats {
   std::string topic;
   uint64_t received = 0;  // messages taken from the bus
-  uint64_t dropped = 0;   // lost in the bridge's bus queue (Subscriber::dropped, all its lives)
-  uint64_t errors = 0;    // messages that failed to encode
+  // Lost in the bridge's bus queue, all its subscribers' lives (Subscriber::dropped without the
+  // client-queue drops counted on it, which ChannelStats::dropped has).
+  uint64_t dropped = 0;
+  uint64_t errors = 0;  // messages that failed to encode
   bool subscribed = false;
 };
 
