@@ -2,6 +2,7 @@
 
 import signal
 import textwrap
+import time
 
 import pytest
 
@@ -153,13 +154,16 @@ def test_ctrl_c_interrupts_a_take_without_a_node(tmp_path, processes):
         from probeless import msgs
 
         sub = probeless.Subscriber("/bare", msgs.ShLight)
-        print("ready", flush=True)
         try:
+            # Inside the try: a SIGINT that lands before take() blocks (a loaded machine) must
+            # not escape as an uncaught KeyboardInterrupt.
+            print("ready", flush=True)
             sub.take()                      # no timeout, Python's own SIGINT handler
         except KeyboardInterrupt:
             print("interrupted", flush=True)
     """))
     child = processes(python_script(script))
     assert child.popen.stdout.readline().strip() == "ready"
+    time.sleep(0.5)  # let take() block, so that it is what the signal interrupts
     assert child.stop(signal.SIGINT, timeout=5) == 0
     assert "interrupted" in child.stdout
