@@ -638,7 +638,10 @@ TEST(ShutdownTest, RateSleepsAndStopsOnRequest) {
 
 // The shared main: bad input is exit 2 with one line, anything else exit 1.
 TEST(RunMainTest, MapsExceptionsToExitCodesAndOneLine) {
-  struct FormatError : std::runtime_error {
+  struct FormatError : InputError {
+    using InputError::InputError;
+  };
+  struct CorruptState : std::runtime_error {
     using std::runtime_error::runtime_error;
   };
   EXPECT_EQ(RunMain("t", [] { return 7; }), 7);
@@ -646,8 +649,9 @@ TEST(RunMainTest, MapsExceptionsToExitCodesAndOneLine) {
   EXPECT_EQ(RunMain("t", []() -> int { throw UsageError("--rate needs a value"); }), 2);
   EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] --rate needs a value\n");
   EXPECT_EQ(RunMain("t", []() -> int { throw NodeError("bad param"); }), 2);
-  EXPECT_EQ(RunMain<FormatError>("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 2);
-  EXPECT_EQ(RunMain("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 1);
+  EXPECT_EQ(RunMain("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 2);
+  EXPECT_EQ(RunMain("t", []() -> int { throw std::invalid_argument("stoi"); }), 2);
+  EXPECT_EQ(RunMain("t", []() -> int { throw CorruptState("index past the end"); }), 1);
   testing::internal::CaptureStderr();
   EXPECT_EQ(RunMain("t", []() -> int { throw std::runtime_error("disk full"); }), 1);
   EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] disk full\n");

@@ -66,8 +66,8 @@ TEST(ThreadPool, RethrowsTheFirstExceptionAndStaysUsable) {
 TEST(ThreadPool, RejectsZeroThreads) {
   try {
     ThreadPool pool(0);
-    FAIL() << "expected std::invalid_argument";
-  } catch (const std::invalid_argument& e) {
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
     EXPECT_STREQ(e.what(), "ThreadPool: threads must be >= 1, got 0");
   }
 }

@@ -123,8 +123,8 @@ TEST(ParseList, CountAndItems) {
 }
 
 TEST(NumberError, IsInvalidArgument) {
-  // node::RunMain maps std::invalid_argument to exit code 2; tools rely on that.
-  EXPECT_THROW(ParseInteger<int>("--n", "x"), std::invalid_argument);
+  // node::RunMain maps InputError to exit code 2; tools rely on that.
+  EXPECT_THROW(ParseInteger<int>("--n", "x"), InputError);
 }
 
 }  // namespace

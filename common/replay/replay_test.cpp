@@ -350,7 +350,7 @@ TEST(PlayerTest, BadOptionsAreRejectedWithOneLine) {
   auto message = [&](PlayerOptions o) -> std::string {
     try {
       Player p(source, Quiet(o));
-    } catch (const std::invalid_argument& e) {
+    } catch (const InputError& e) {
       return e.what();
     }
     return "";

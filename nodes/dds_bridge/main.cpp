@@ -151,6 +151,6 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::dds_bridge::DdsBridgeError>(
+  return probeless::node::RunMain(
       "dds_bridge", [&] { return Run(argc, argv); });
 }

@@ -231,5 +231,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::RunMain<fl::FaceLightError>("face_light", [&] { return Run(argc, argv); });
+  return node::RunMain("face_light", [&] { return Run(argc, argv); });
 }

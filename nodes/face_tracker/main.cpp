@@ -172,6 +172,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::RunMain<ft::FaceTrackError, face_light::FaceLightError>(
-      "face_tracker", [&] { return Run(argc, argv); });
+  return node::RunMain("face_tracker", [&] { return Run(argc, argv); });
 }

@@ -150,6 +150,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::foxglove::FoxgloveError>(
-      "foxglove_bridge", [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("foxglove_bridge", [&] { return Run(argc, argv); });
 }

@@ -106,6 +106,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::light::FusionError>("light_fusion",
-                                                                 [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("light_fusion", [&] { return Run(argc, argv); });
 }

@@ -279,6 +279,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::dataset::DatasetError>(
-      "player", [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("player", [&] { return Run(argc, argv); });
 }

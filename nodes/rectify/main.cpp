@@ -171,6 +171,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::rectify::RectifyError>(
-      "rectify", [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("rectify", [&] { return Run(argc, argv); });
 }

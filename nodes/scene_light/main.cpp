@@ -544,6 +544,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::RunMain<light::LightError, msgs::MessageError>("scene_light",
-                                                              [&] { return Run(argc, argv); });
+  return node::RunMain("scene_light", [&] { return Run(argc, argv); });
 }

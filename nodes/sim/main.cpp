@@ -373,6 +373,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain<probeless::dataset::DatasetError>(
-      "sim", [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("sim", [&] { return Run(argc, argv); });
 }

@@ -241,5 +241,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::RunMain<log::LogError>("demo_report", [&] { return Run(argc, argv); });
+  return node::RunMain("demo_report", [&] { return Run(argc, argv); });
 }

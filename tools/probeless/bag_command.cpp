@@ -172,9 +172,7 @@ int Convert(int argc, char** argv) {
       } else {
         positional.push_back(a);
       }
-    } catch (const std::invalid_argument& e) {
-      return BagUsageError("convert: " + std::string(e.what()));
-    } catch (const log::LogError& e) {
+    } catch (const InputError& e) {  // a bad number (parse::NumberError) or topic filter (LogError)
       return BagUsageError("convert: " + std::string(e.what()));
     }
   }

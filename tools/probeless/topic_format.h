@@ -17,14 +17,15 @@
 #include <vector>
 
 #include "probeless/bus/bus.h"
+#include "probeless/error/error.h"
 
 namespace probeless::tools {
 
 // Bad command-line input (exit code 2). what() is one line naming the argument and what was
 // expected, without the "probeless topic <sub>: " prefix (the command adds it).
-class UsageError : public std::runtime_error {
+class UsageError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // --- Arguments ---------------------------------------------------------------------------------

@@ -1517,6 +1517,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::RunMain<light::LightError, sim::ScenarioError>("scene_light_eval",
-                                                              [&] { return Run(argc, argv); });
+  return node::RunMain("scene_light_eval", [&] { return Run(argc, argv); });
 }

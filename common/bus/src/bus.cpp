@@ -4,13 +4,13 @@
 
 #include <algorithm>
 #include <bit>
-#include <cassert>
 #include <cctype>
 #include <cstdlib>
 #include <cstring>
 #include <optional>
 #include <utility>
 
+#include "probeless/error/error.h"
 #include "shm.h"
 #include "topic.h"
 
@@ -157,7 +157,8 @@ struct SubscriberImpl {
     QueueEntry ref{};
     {
       RobustLock lock(&entry->mutex);
-      assert(entry->held_mask & (1u << held_index));
+      PROBELESS_DEMAND(entry->held_mask & (1u << held_index),
+                       "releasing a slot the subscriber does not hold");
       ref = entry->held[held_index];
       entry->held_mask &= ~(1u << held_index);
       OrderStores();

@@ -11,12 +11,13 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <sstream>
 #include <vector>
+
+#include "probeless/error/error.h"
 
 namespace probeless::bus::internal {
 namespace {
@@ -175,8 +176,7 @@ void InitRobustMutex(pthread_mutex_t* mutex) {
   pthread_mutexattr_setrobust(&attr, PTHREAD_MUTEX_ROBUST);
   const int rc = pthread_mutex_init(mutex, &attr);
   pthread_mutexattr_destroy(&attr);
-  assert(rc == 0);
-  (void)rc;
+  PROBELESS_DEMAND(rc == 0, "pthread_mutex_init of a robust shared mutex failed");
 }
 
 RobustLock::RobustLock(pthread_mutex_t* mutex) : mutex_(mutex) {

@@ -3,13 +3,14 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
 #include <new>
 #include <thread>
 #include <utility>
+
+#include "probeless/error/error.h"
 
 namespace probeless::bus::internal {
 namespace {
@@ -112,7 +113,7 @@ PublisherHeader* TopicHandle::Header(const Mapping& mapping) {
 }
 
 SlotHeader* TopicHandle::Slot(const Mapping& mapping, uint32_t slot) {
-  assert(slot < mapping.slot_count);
+  PROBELESS_DEMAND(slot < mapping.slot_count, "slot index past the publisher's pool");
   return reinterpret_cast<SlotHeader*>(mapping.base() + SlotsOffset() + slot * mapping.stride);
 }
 
@@ -186,8 +187,7 @@ void TopicHandle::DecRef(const QueueEntry& entry) {
   if (entry.slot >= mapping->slot_count) return;  // a corrupt entry names no slot of the pool
   SlotHeader* slot = Slot(*mapping, entry.slot);
   const uint32_t before = slot->refs.fetch_sub(1, std::memory_order_acq_rel);
-  assert((before & ~kLoanBit) != 0 && "slot reference count underflow");
-  (void)before;
+  PROBELESS_DEMAND((before & ~kLoanBit) != 0, "slot reference count underflow");
 }
 
 bool TopicHandle::Referenced(uint32_t index, uint32_t generation) {
@@ -278,7 +278,7 @@ bool TopicHandle::TryFreeZombieLocked(uint32_t index) {
 
 void TopicHandle::PurgeZombieLocked(uint32_t index) {
   PublisherEntry& entry = ctrl_->publishers[index];
-  assert(entry.state.load() == kZombie);
+  PROBELESS_DEMAND(entry.state.load() == kZombie, "purging a publisher entry that is not a zombie");
   for (auto& sub : ctrl_->subscribers) {
     if (sub.state.load() != kActive) continue;
     RobustLock lock(&sub.mutex);

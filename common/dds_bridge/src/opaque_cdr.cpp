@@ -2,9 +2,10 @@
 
 #include <dds/ddsi/q_radmin.h>
 
-#include <cassert>
 #include <cstdio>
 #include <cstring>
+
+#include "probeless/error/error.h"
 
 namespace probeless::dds_bridge::internal {
 namespace {
@@ -36,7 +37,7 @@ ddsi_serdata* FromSer(const ddsi_sertype* type, ddsi_serdata_kind kind, const nn
           NN_RMSG_PAYLOADOFF(fragchain->rmsg, NN_RDATA_PAYLOAD_OFF(fragchain));
       const unsigned char* src = payload + off - fragchain->min;
       const uint32_t n = fragchain->maxp1 - off;
-      assert(off + n <= size);
+      PROBELESS_DEMAND(off + n <= size, "DDS fragment chain past the sample size");
       std::memcpy(d->bytes.data() + off, src, n);
       off = fragchain->maxp1;
     }

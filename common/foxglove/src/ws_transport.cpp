@@ -14,6 +14,8 @@
 #include <websocketpp/config/asio_no_tls.hpp>
 #include <websocketpp/server.hpp>
 
+#include "probeless/error/error.h"
+
 namespace probeless::foxglove::internal {
 namespace {
 
@@ -172,15 +174,15 @@ WsTransport::WsTransport(const TransportOptions& options, TransportCallbacks cal
 
   websocketpp::lib::error_code ec;
   const asio::ip::address address = asio::ip::make_address(options.address, ec);
-  if (ec) throw std::runtime_error("invalid address '" + options.address + "'");
+  if (ec) throw InputError("invalid address '" + options.address + "'");
   s.server.listen(asio::ip::tcp::endpoint(address, options.port), ec);
   if (ec) {
-    throw std::runtime_error("cannot listen on " + options.address + ":" +
-                             std::to_string(options.port) + ": " + ec.message());
+    throw InputError("cannot listen on " + options.address + ":" + std::to_string(options.port) +
+                     ": " + ec.message());
   }
   s.port = s.server.get_local_endpoint(ec).port();
   s.server.start_accept(ec);
-  if (ec) throw std::runtime_error("cannot accept connections: " + ec.message());
+  if (ec) throw InputError("cannot accept connections: " + ec.message());
   s.timer = std::make_unique<asio::steady_timer>(s.server.get_io_service());
 }
 

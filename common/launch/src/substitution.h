@@ -9,12 +9,14 @@
 #include <string>
 #include <string_view>
 
+#include "probeless/error/error.h"
+
 namespace probeless::launch::internal {
 
 // A substitution problem without location; the parser adds "<file>:<line>:<col>: ".
-class SubstitutionError : public std::runtime_error {
+class SubstitutionError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 struct SubstitutionContext {

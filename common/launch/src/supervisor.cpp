@@ -13,7 +13,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -29,7 +28,10 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <system_error>
 #include <vector>
+
+#include "probeless/error/error.h"
 
 extern char** environ;
 
@@ -218,7 +220,7 @@ class Supervisor {
     for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGCHLD}) sigaddset(&mask, sig);
     ::sigprocmask(SIG_BLOCK, &mask, &old_mask_);
     signal_fd_ = ::signalfd(-1, &mask, SFD_CLOEXEC | SFD_NONBLOCK);
-    assert(signal_fd_ >= 0);
+    if (signal_fd_ < 0) throw std::system_error(errno, std::generic_category(), "launch: signalfd");
     struct sigaction ignore {};
     ignore.sa_handler = SIG_IGN;
     ::sigaction(SIGPIPE, &ignore, &old_sigpipe_);
@@ -464,7 +466,7 @@ class Supervisor {
       if (fds[i].revents == 0) continue;
       auto it = std::find_if(streams_.begin(), streams_.end(),
                              [&](const Stream& s) { return s.fd == fds[i].fd; });
-      assert(it != streams_.end());
+      PROBELESS_DEMAND(it != streams_.end(), "poll reported a descriptor that is no stream");
       if (!ReadStream(*it)) closed.push_back(it->fd);
     }
     for (int fd : closed) {

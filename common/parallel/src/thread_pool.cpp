@@ -58,7 +58,7 @@ struct ThreadPool::Impl {
 
 ThreadPool::ThreadPool(int threads) : impl_(std::make_unique<Impl>()) {
   if (threads < 1) {
-    throw std::invalid_argument("ThreadPool: threads must be >= 1, got " + std::to_string(threads));
+    throw InputError("ThreadPool: threads must be >= 1, got " + std::to_string(threads));
   }
   for (int i = 1; i < threads; ++i) impl_->workers.emplace_back([this] { impl_->Loop(); });
 }

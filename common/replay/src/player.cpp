@@ -13,6 +13,7 @@
 #include <stdexcept>
 
 #include "probeless/bus/bus.h"
+#include "probeless/error/error.h"
 #include "probeless/msgs/header.h"
 #include "probeless/msgs/replay.h"
 
@@ -41,7 +42,7 @@ std::regex CompileTopicRegex(const std::string& pattern) {
   try {
     return std::regex(pattern, std::regex::ECMAScript);
   } catch (const std::regex_error& e) {
-    throw std::invalid_argument("player: invalid topic regex '" + pattern + "': " + e.what());
+    throw InputError("player: invalid topic regex '" + pattern + "': " + e.what());
   }
 }
 
@@ -320,10 +321,10 @@ Player::Player(dataset::Source& source, PlayerOptions options)
   Impl& impl = *impl_;
   const PlayerOptions& o = impl.options;
   if (!o.as_fast_as_possible && !(std::isfinite(o.rate) && o.rate > 0)) {
-    throw std::invalid_argument("player: rate must be > 0, got " + std::to_string(o.rate));
+    throw InputError("player: rate must be > 0, got " + std::to_string(o.rate));
   }
   if (!(o.start_s >= 0) || !(o.duration_s >= 0)) {
-    throw std::invalid_argument("player: start and duration must be >= 0 seconds");
+    throw InputError("player: start and duration must be >= 0 seconds");
   }
   impl.rate = o.as_fast_as_possible ? 1.0 : o.rate;
   impl.paused = o.start_paused;
@@ -346,7 +347,7 @@ Player::Player(dataset::Source& source, PlayerOptions options)
     try {
       bus::ValidateTopicName(target);
     } catch (const bus::BusError& e) {
-      throw std::invalid_argument(std::string("player: ") + e.what());
+      throw InputError(std::string("player: ") + e.what());
     }
     bus::PublisherOptions po;
     po.max_message_bytes = std::max<size_t>(topics[t].max_message_bytes, 64);
@@ -374,8 +375,8 @@ Player::Player(dataset::Source& source, PlayerOptions options)
     impl.lock_nodes.reserve(o.lockstep_nodes.size());
     for (const auto& name : o.lockstep_nodes) {
       if (!name.starts_with('/')) {
-        throw std::invalid_argument("player: lock-step node '" + name +
-                                    "' must be a fully qualified node name such as /" + name);
+        throw InputError("player: lock-step node '" + name +
+                         "' must be a fully qualified node name such as /" + name);
       }
       bus::SubscriberOptions so;
       so.queue_depth = 64;

@@ -31,14 +31,15 @@
 #include <type_traits>
 
 #include "probeless/bus/bus.h"
+#include "probeless/error/error.h"
 
 namespace probeless::msgs {
 
 // The exception for bad message contents or sizes at a boundary (payload too small, unknown
 // encoding, string too long, ...). what() is one line naming the message type and the problem.
-class MessageError : public std::runtime_error {
+class MessageError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Byte alignment of a payload relative to the slot start (the bus aligns slots to 64 bytes).

@@ -37,12 +37,14 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::bus {
 
 // The single exception type of the bus; what() is one line naming the topic and the problem.
-class BusError : public std::runtime_error {
+class BusError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Hard limits of one topic (compile-time, part of the shared layout).
@@ -262,8 +264,8 @@ struct PublisherSnapshot {
   size_t max_message_bytes = 0;
   uint32_t slot_count = 0;
   uint32_t history = 0;
-  uint64_t published = 0;        // messages since the publisher joined
-  uint64_t published_bytes = 0;  // payload bytes since the publisher joined
+  uint64_t published = 0;            // messages since the publisher joined
+  uint64_t published_bytes = 0;      // payload bytes since the publisher joined
   int64_t last_publish_mono_ns = 0;  // CLOCK_MONOTONIC ns of the last Publish()
 };
 

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/msgs/camera_info.h"
 
 namespace probeless::calib {
@@ -17,9 +18,9 @@ namespace probeless::calib {
 // A calibration file that cannot be read, parsed or written, or a bad argument: one line naming the
 // file (if any) and the missing or malformed entry, e.g.
 // "calibration file 'cam.yaml': camera matrix has 8 entries, expected 9 (3x3)".
-class CalibrationError : public std::runtime_error {
+class CalibrationError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Pinhole intrinsics in pixels (pixel (0, 0) is the centre of the top-left pixel; camera optical

@@ -6,6 +6,8 @@
 #include <string>
 #include <string_view>
 
+#include "probeless/error/error.h"
+
 namespace probeless::capture {
 
 // Why a device could not be opened or stopped delivering.
@@ -23,10 +25,9 @@ std::string_view ErrorKindName(ErrorKind kind);
 
 // One line naming the device and what to do, e.g. "V4L2 device '/dev/video3' does not exist: plug
 // the camera in or pick another with param 'device' (ls /dev/v4l/by-id)".
-class CaptureError : public std::runtime_error {
+class CaptureError : public InputError {
  public:
-  CaptureError(ErrorKind kind, const std::string& message)
-      : std::runtime_error(message), kind_(kind) {}
+  CaptureError(ErrorKind kind, const std::string& message) : InputError(message), kind_(kind) {}
   ErrorKind kind() const { return kind_; }
   // Whether waiting and reopening may help (no device, busy, disconnected, device error).
   bool retryable() const {

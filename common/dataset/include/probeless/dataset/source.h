@@ -11,15 +11,16 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/log/ros2.h"
 
 namespace probeless::dataset {
 
 // Bad input of a source (missing or malformed file, unknown kind, inconsistent folder): one line
 // naming the file or folder and what was expected.
-class DatasetError : public std::runtime_error {
+class DatasetError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // One topic of a source.

@@ -29,12 +29,14 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::dds_bridge {
 
 // Bad configuration or a DDS failure; what() is one line.
-class DdsBridgeError : public std::runtime_error {
+class DdsBridgeError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 enum class Reliability { kReliable, kBestEffort };
@@ -49,7 +51,8 @@ struct Qos {
 // "reliable"/"best_effort", "volatile"/"transient_local"; throws DdsBridgeError otherwise.
 Reliability ParseReliability(std::string_view text);
 Durability ParseDurability(std::string_view text);
-// "REGEX=reliability,depth,durability" (any of the three may be empty: "/camera/.*=best_effort,2,").
+// "REGEX=reliability,depth,durability" (any of the three may be empty:
+// "/camera/.*=best_effort,2,").
 struct QosRule {
   std::string regex;  // searched in the ROS (bus) topic name
   std::optional<Reliability> reliability;

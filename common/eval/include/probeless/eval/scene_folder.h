@@ -10,13 +10,15 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::eval {
 
 // Bad input of the evaluation (malformed or missing scene file): one line naming the file, the
 // line where known, the field and what was expected.
-class EvalError : public std::runtime_error {
+class EvalError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 enum class Shape { kSphere, kBox };

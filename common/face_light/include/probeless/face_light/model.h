@@ -23,13 +23,15 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::face_light {
 
 // Bad input at the library's boundary (malformed or mismatched model file, bad sample counts,
 // unreadable data set): one line naming the thing and what was expected.
-class FaceLightError : public std::runtime_error {
+class FaceLightError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Size of the canonical crop in pixels.

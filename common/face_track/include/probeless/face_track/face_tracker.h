@@ -15,15 +15,16 @@
 #include <stdexcept>
 #include <string>
 
+#include "probeless/error/error.h"
 #include "probeless/face_track/head_model.h"
 
 namespace probeless::face_track {
 
 // Bad input at the library's boundary (missing or unreadable model file, unknown backend, bad
 // image or option): one line naming the thing and what was expected.
-class FaceTrackError : public std::runtime_error {
+class FaceTrackError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Debian package paths of the models (libdlib-data; opencv-data for the Haar cascade).

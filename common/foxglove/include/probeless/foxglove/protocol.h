@@ -22,12 +22,14 @@
 #include <variant>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::foxglove {
 
 // Bad configuration of the bridge (options, topic selection); what() is one line.
-class FoxgloveError : public std::runtime_error {
+class FoxgloveError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // A client message the server cannot accept; what() is one line, sent back as an error status,

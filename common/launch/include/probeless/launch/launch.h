@@ -24,12 +24,14 @@
 #include <utility>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::launch {
 
 // The single exception type of launch file parsing.
-class LaunchError : public std::runtime_error {
+class LaunchError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Where something was declared: file as given/resolved (absolute for files read from disk), 1-based

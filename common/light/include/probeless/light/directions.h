@@ -8,12 +8,14 @@
 #include <stdexcept>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::light {
 
 // Bad input at the public boundary of probeless_light: one line "light::<Function>: <problem>".
-class LightError : public std::invalid_argument {
+class LightError : public InputError {
  public:
-  using std::invalid_argument::invalid_argument;
+  using InputError::InputError;
 };
 
 using Vec3f = std::array<float, 3>;

@@ -11,13 +11,14 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/msgs/sh_light.h"
 
 namespace probeless::light {
 
-class FusionError : public std::runtime_error {
+class FusionError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // The one confidence scale of msgs::ShLight (docs/messages.md): confidence c <-> expected RMS

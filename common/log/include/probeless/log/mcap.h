@@ -15,13 +15,15 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::log {
 
 // The single exception type of the log library (CdrError derives from it). what() is one line;
 // for file problems it starts with "<path>: offset <byte offset>: ".
-class LogError : public std::runtime_error {
+class LogError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Compression of the records inside a Chunk.

@@ -40,13 +40,14 @@
 #include <vector>
 
 #include "probeless/bus/bus.h"
+#include "probeless/error/error.h"
 #include "probeless/msgs/layout.h"
 
 namespace probeless::node {
 
-class NodeError : public std::runtime_error {
+class NodeError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 enum class LogLevel : int { kDebug = 0, kInfo = 1, kWarn = 2, kError = 3 };

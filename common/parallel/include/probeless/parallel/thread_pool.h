@@ -8,12 +8,14 @@
 #include <functional>
 #include <memory>
 
+#include "probeless/error/error.h"
+
 namespace probeless::parallel {
 
 class ThreadPool {
  public:
   // `threads` >= 1 threads in all, the caller of ParallelFor included (threads - 1 are started).
-  // Throws std::invalid_argument for threads < 1.
+  // Throws InputError (probeless/error/error.h) for threads < 1.
   explicit ThreadPool(int threads);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;

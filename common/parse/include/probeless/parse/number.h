@@ -21,6 +21,8 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::parse {
 
 // A number that does not parse or is out of range: one line naming the input (an option, a
@@ -28,10 +30,10 @@ namespace probeless::parse {
 //   "--chunk-size expects a positive integer, got '12abc'"
 //   "--chunk-size expects a positive integer up to 18446744073709551615, got
 //    '99999999999999999999'"
-// It is a std::invalid_argument, so node::RunMain exits 2 for it without further mapping.
-class NumberError : public std::invalid_argument {
+// It is an InputError, so node::RunMain exits 2 for it.
+class NumberError : public InputError {
  public:
-  using std::invalid_argument::invalid_argument;
+  using InputError::InputError;
 };
 
 namespace internal {

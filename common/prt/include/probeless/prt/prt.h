@@ -28,14 +28,15 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/raytrace/geometry.h"
 #include "probeless/raytrace/mesh.h"
 
 namespace probeless::prt {
 
-class PrtError : public std::runtime_error {
+class PrtError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // A mesh with one transfer vector per vertex. The mesh is expressed in its bake frame (e.g. the

@@ -8,15 +8,16 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/raytrace/geometry.h"
 
 namespace probeless::raytrace {
 
 // Bad input at the ray tracer's boundary (malformed mesh or texture file, invalid argument): one
 // line naming the file (and line, for text formats) and what was expected.
-class RaytraceError : public std::runtime_error {
+class RaytraceError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // An indexed triangle mesh. Optional per-vertex arrays are either empty or have positions.size()

@@ -9,15 +9,16 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/msgs/geometry.h"
 
 namespace probeless::recon {
 
 // Bad input at the library boundary (wrong depth encoding, empty frame, invalid intrinsics or
 // options): one line naming the input and what was expected.
-class ReconError : public std::runtime_error {
+class ReconError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // A float 3-vector (metres for points).

@@ -46,14 +46,15 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/log/mcap.h"
 
 namespace probeless::record {
 
 // Bad recorder options; what() is one line naming the option and what was expected.
-class RecordError : public std::runtime_error {
+class RecordError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Message encoding of channels recorded raw (types without a ROS 2 converter).

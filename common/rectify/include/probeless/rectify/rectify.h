@@ -13,6 +13,7 @@
 #include <string>
 #include <string_view>
 
+#include "probeless/error/error.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/image.h"
 
@@ -21,9 +22,9 @@ namespace probeless::rectify {
 // Bad input (a malformed or inconsistent camera_info, an image that does not match its
 // calibration, an unsupported encoding, bad options): one line naming the topic or file given as
 // `source`, e.g. "/camera/camera_info: distortion coefficient 2 (p1) is NaN".
-class RectifyError : public std::runtime_error {
+class RectifyError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // How depth images (depth16, float32) are resampled. Neither mixes depths across a discontinuity.

@@ -35,15 +35,16 @@
 #include <string>
 #include <vector>
 
+#include "probeless/error/error.h"
 #include "probeless/prt/prt.h"
 #include "probeless/raytrace/geometry.h"
 #include "probeless/raytrace/scene.h"
 
 namespace probeless::render {
 
-class RenderError : public std::runtime_error {
+class RenderError : public InputError {
  public:
-  using std::runtime_error::runtime_error;
+  using InputError::InputError;
 };
 
 // Which GL context the renderer creates.

@@ -70,7 +70,7 @@ struct PlayerStats {
 
 class Player {
  public:
-  // Validates the options (throws std::invalid_argument with one line: bad rate, bad regex,
+  // Validates the options (throws InputError with one line: bad rate, bad regex,
   // remap to an invalid topic name) and creates one publisher per selected topic, the clock
   // publisher and the control subscriber. The source must outlive the player.
   Player(dataset::Source& source, PlayerOptions options);

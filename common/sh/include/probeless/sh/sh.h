@@ -21,7 +21,6 @@
 #pragma once
 
 #include <array>
-#include <cassert>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -33,12 +32,14 @@
 #include <string_view>
 #include <vector>
 
+#include "probeless/error/error.h"
+
 namespace probeless::sh {
 
 // Bad argument to an SH function (one-line message "sh::<Function>: <problem>").
-class ShError : public std::invalid_argument {
+class ShError : public InputError {
  public:
-  using std::invalid_argument::invalid_argument;
+  using InputError::InputError;
 };
 
 // Highest supported number of bands (degrees 0..4) and the matching coefficient count.
@@ -137,11 +138,11 @@ const T* BasisNormalisationTable() {
 // on Q_l^m = P_l^m(z) / sin^m(theta) (Condon-Shortley phase in Q_m^m), with sin^m(theta) cos(m phi)
 // = Re((x + i y)^m) and sin^m(theta) sin(m phi) = Im((x + i y)^m) (EvaluateWeightedBasis with
 // BasisNormalisation). The direction is not normalised here (non-unit input gives the homogeneous
-// polynomials, scaled). bands must be 1..5 (asserted only: this is the hot path; use Basis() for a
-// checked call).
+// polynomials, scaled). bands must be 1..5 (a broken-invariant abort, not an exception: this is the
+// hot path; use Basis() for a call that throws ShError).
 template <typename T>
 inline void EvaluateBasis(int bands, T x, T y, T z, T* out) {
-  assert(bands >= 1 && bands <= 5);
+  PROBELESS_DEMAND(bands >= 1 && bands <= 5, "sh::EvaluateBasis: bands must be 1..5");
   const T* k = internal::BasisNormalisationTable<T>();
   switch (bands) {
     case 1:
