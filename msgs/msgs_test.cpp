@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "probeless/testing/expect.h"
+
 namespace probeless::msgs {
 namespace {
 
@@ -33,16 +35,6 @@ class Slot {
   std::unique_ptr<std::byte, Free> data_;
   size_t size_;
 };
-
-template <class F>
-std::string ErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const MessageError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 
 // --- Layout hash -------------------------------------------------------------------------------
 
@@ -203,15 +195,18 @@ struct Unlisted {
 
 TEST(LayoutHashTest, BuilderRejectsImplicitPaddingAndUnlistedFields) {
   // In a constant expression (kLayoutHash) these are compile errors; at run time they throw.
-  EXPECT_EQ(ErrorOf([] { Holey::LayoutDescription(); }),
-            "layout of test/Holey: field 'b' at offset 4, expected 1 (implicit padding or a field "
-            "missing from the description)");
-  EXPECT_EQ(ErrorOf([] { TailPadded::LayoutDescription(); }),
-            "layout of test/TailPadded: fields end at byte 9 but sizeof is 16 (implicit tail "
-            "padding or a field missing from the description)");
-  EXPECT_EQ(ErrorOf([] { Unlisted::LayoutDescription(); }),
-            "layout of test/Unlisted: field 'c' at offset 8, expected 4 (implicit padding or a "
-            "field missing from the description)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      Holey::LayoutDescription(), MessageError,
+      "layout of test/Holey: field 'b' at offset 4, expected 1 (implicit padding or a field "
+      "missing from the description)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      TailPadded::LayoutDescription(), MessageError,
+      "layout of test/TailPadded: fields end at byte 9 but sizeof is 16 (implicit tail "
+      "padding or a field missing from the description)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      Unlisted::LayoutDescription(), MessageError,
+      "layout of test/Unlisted: field 'c' at offset 8, expected 4 (implicit padding or a "
+      "field missing from the description)");
 }
 
 template <class... M>
@@ -245,18 +240,21 @@ TEST(LayoutHashTest, EveryMessageTypeHasADistinctSelfConsistentHash) {
 
 TEST(TrackingStatusTest, ValidatesStateScoreAndFlags) {
   TrackingStatus status;
-  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
-            "probeless_msgs/TrackingStatus: state 0 is not tracked (1), uncertain (2) or lost (3)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      status.Validate(), MessageError,
+      "probeless_msgs/TrackingStatus: state 0 is not tracked (1), uncertain (2) or lost (3)");
   status.state = TrackingStatusState::kUncertain;
   status.score = 0.25f;
   EXPECT_NO_THROW(status.Validate());
   status.score = 1.5f;
-  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
-            "probeless_msgs/TrackingStatus: score 1.500000 is outside [0, 1]");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      status.Validate(), MessageError,
+      "probeless_msgs/TrackingStatus: score 1.500000 is outside [0, 1]");
   status.score = 0;
   status.integrated = 2;
-  EXPECT_EQ(ErrorOf([&] { status.Validate(); }),
-            "probeless_msgs/TrackingStatus: integrated and relocalised must be 0 or 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      status.Validate(), MessageError,
+      "probeless_msgs/TrackingStatus: integrated and relocalised must be 0 or 1");
   status.integrated = 0;
   status.SetReasonText(std::string(500, 'r'));  // cut, not refused
   EXPECT_EQ(status.ReasonText().size(), kTrackingReasonCapacity - 1);
@@ -324,13 +322,15 @@ TEST(MessageViewTest, WriteZeroesTheStructAndLeavesThePayload) {
 
 TEST(MessageViewTest, RejectsShortOrMisalignedBytes) {
   Slot slot(256);
-  EXPECT_EQ(ErrorOf([&] { ReadMessage<Image>(slot.cbytes().first(100)); }),
-            "probeless_msgs/Image: message of 100 bytes is smaller than its fixed part (128 "
-            "bytes)");
-  EXPECT_EQ(ErrorOf([&] { WriteMessage<Pose>(slot.bytes().first(175)); }),
-            "probeless_msgs/Pose: message of 175 bytes is smaller than its fixed part (176 bytes)");
-  EXPECT_EQ(ErrorOf([&] { ReadMessage<Image>(slot.cbytes().subspan(8)); }),
-            "probeless_msgs/Image: message bytes are not 64-byte aligned");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadMessage<Image>(slot.cbytes().first(100)), MessageError,
+      "probeless_msgs/Image: message of 100 bytes is smaller than its fixed part (128 "
+      "bytes)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      WriteMessage<Pose>(slot.bytes().first(175)), MessageError,
+      "probeless_msgs/Pose: message of 175 bytes is smaller than its fixed part (176 bytes)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ReadMessage<Image>(slot.cbytes().subspan(8)), MessageError,
+                                  "probeless_msgs/Image: message bytes are not 64-byte aligned");
   EXPECT_EQ(ReadMessage<Pose>(slot.cbytes().first(176)).payload.size(), 0u);
 }
 
@@ -343,10 +343,11 @@ TEST(FixedStringTest, RoundTripsAndRejectsLongOrNulStrings) {
   header.SetFrameId("a");
   EXPECT_EQ(header.FrameId(), "a");
   EXPECT_EQ(header.frame_id[2], '\0');  // the old tail is cleared
-  EXPECT_EQ(ErrorOf([&] { header.SetFrameId(std::string(32, 'y')); }),
-            "frame_id '" + std::string(32, 'y') + "' has 32 characters, at most 31 fit");
-  EXPECT_EQ(ErrorOf([&] { header.SetFrameId(std::string_view("a\0b", 3)); }),
-            "frame_id contains a NUL character");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      header.SetFrameId(std::string(32, 'y')), MessageError,
+      "frame_id '" + std::string(32, 'y') + "' has 32 characters, at most 31 fit");
+  PROBELESS_EXPECT_THROWS_MESSAGE(header.SetFrameId(std::string_view("a\0b", 3)), MessageError,
+                                  "frame_id contains a NUL character");
   // An unterminated field (from a foreign writer) is read up to its capacity, never beyond.
   std::memset(header.frame_id, 'z', sizeof(header.frame_id));
   EXPECT_EQ(header.FrameId(), std::string(32, 'z'));
@@ -383,8 +384,8 @@ TEST(ImageTest, SizeHelpers) {
   image.Init(641, 3, Encoding::kFloat32);
   EXPECT_EQ(image.step, 2564u);
   EXPECT_EQ(image.PayloadBytes(), 7692u);
-  EXPECT_EQ(ErrorOf([&] { image.Init(1, 1, static_cast<Encoding>(9)); }),
-            "Image: invalid encoding 9");
+  PROBELESS_EXPECT_THROWS_MESSAGE(image.Init(1, 1, static_cast<Encoding>(9)), MessageError,
+                                  "Image: invalid encoding 9");
 }
 
 TEST(ImageTest, EncodingNamesRoundTrip) {
@@ -393,9 +394,10 @@ TEST(ImageTest, EncodingNamesRoundTrip) {
     EXPECT_EQ(EncodingFromName(EncodingName(e)), e);
   }
   EXPECT_EQ(EncodingName(static_cast<Encoding>(42)), "invalid");
-  EXPECT_EQ(ErrorOf([] { EncodingFromName("16UC1"); }),
-            "unknown image encoding '16UC1' (expected rgb8, bgr8, mono8, mono16, depth16, float32 "
-            "or rgb32f)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      EncodingFromName("16UC1"), MessageError,
+      "unknown image encoding '16UC1' (expected rgb8, bgr8, mono8, mono16, depth16, float32 "
+      "or rgb32f)");
 }
 
 TEST(ImageTest, Rgb32fRowsAreThreeFloatsPerPixel) {
@@ -408,8 +410,9 @@ TEST(ImageTest, Rgb32fRowsAreThreeFloatsPerPixel) {
   row1[5] = 0.25f;  // pixel (1, 1), blue
   ReadView<Image> in = ReadMessage<Image>(slot.cbytes());
   EXPECT_EQ(ImageChannels<float>(*in, in.payload)[11], 0.25f);
-  EXPECT_EQ(ErrorOf([&] { ImageChannels<uint8_t>(*in, in.payload); }),
-            "Image 2x2 rgb32f (step 24): encoding rgb32f has float32 channels, not uint8");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ImageChannels<uint8_t>(*in, in.payload), MessageError,
+      "Image 2x2 rgb32f (step 24): encoding rgb32f has float32 channels, not uint8");
 }
 
 TEST(ImageTest, TypedAccessorsHonourStepAndRejectBadRequests) {
@@ -427,23 +430,27 @@ TEST(ImageTest, TypedAccessorsHonourStepAndRejectBadRequests) {
   ASSERT_EQ(row1.size(), 3u);
   EXPECT_EQ(row1[0], 1005);  // row 1 starts at byte 10 = element 5
   EXPECT_EQ(row1[2], 1007);
-  EXPECT_EQ(ErrorOf([&] { ImageRow<uint16_t>(*in, in.payload, 2); }),
-            "Image 3x2 depth16 (step 10): row 2 out of range");
-  EXPECT_EQ(ErrorOf([&] { ImageChannels<float>(*in, in.payload); }),
-            "Image 3x2 depth16 (step 10): encoding depth16 has uint16 channels, not float32");
-  EXPECT_EQ(ErrorOf([&] { ImageChannels<uint8_t>(*in, in.payload); }),
-            "Image 3x2 depth16 (step 10): encoding depth16 has uint16 channels, not uint8");
-  EXPECT_EQ(ErrorOf([&] { ImageChannels<uint16_t>(*in, in.payload.first(19)); }),
-            "Image 3x2 depth16 (step 10) needs 20 payload bytes, got 19");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ImageRow<uint16_t>(*in, in.payload, 2), MessageError,
+                                  "Image 3x2 depth16 (step 10): row 2 out of range");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ImageChannels<float>(*in, in.payload), MessageError,
+      "Image 3x2 depth16 (step 10): encoding depth16 has uint16 channels, not float32");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ImageChannels<uint8_t>(*in, in.payload), MessageError,
+      "Image 3x2 depth16 (step 10): encoding depth16 has uint16 channels, not uint8");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ImageChannels<uint16_t>(*in, in.payload.first(19)), MessageError,
+                                  "Image 3x2 depth16 (step 10) needs 20 payload bytes, got 19");
 
   Image bad = *in;
   bad.step = 5;
-  EXPECT_EQ(ErrorOf([&] { bad.Validate(100); }),
-            "Image 3x2 depth16 (step 5): step 5 is smaller than width * 2 bytes per pixel");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      bad.Validate(100), MessageError,
+      "Image 3x2 depth16 (step 5): step 5 is smaller than width * 2 bytes per pixel");
   bad.step = 7;
   bad.width = 1;
-  EXPECT_EQ(ErrorOf([&] { bad.Validate(100); }),
-            "Image 1x2 depth16 (step 7): step 7 is not a multiple of the 2-byte channel size");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      bad.Validate(100), MessageError,
+      "Image 1x2 depth16 (step 7): step 7 is not a multiple of the 2-byte channel size");
 }
 
 TEST(ImageTest, FullVgaFramesFitAndAreRejectedWhenShort) {
@@ -454,8 +461,9 @@ TEST(ImageTest, FullVgaFramesFitAndAreRejectedWhenShort) {
   EXPECT_EQ(rgb.size(), 921'600u);
   EXPECT_EQ(static_cast<void*>(rgb.data()), static_cast<void*>(out.payload.data()));
   EXPECT_EQ(ImageRow<uint8_t>(*out, out.payload, 479).size(), 1920u);
-  EXPECT_EQ(ErrorOf([&] { ImageChannels<uint8_t>(*out, out.payload.first(1000)); }),
-            "Image 640x480 rgb8 (step 1920) needs 921600 payload bytes, got 1000");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ImageChannels<uint8_t>(*out, out.payload.first(1000)), MessageError,
+      "Image 640x480 rgb8 (step 1920) needs 921600 payload bytes, got 1000");
 
   out->Init(640, 480, Encoding::kDepth16);
   EXPECT_EQ(ImageChannels<uint16_t>(*out, out.payload.first(614'400)).size(), 307'200u);
@@ -474,20 +482,21 @@ TEST(CameraInfoTest, ValidateChecksModelAndCount) {
   info.depth_scale = 0.001;
   EXPECT_NO_THROW(info.Validate());
   info.distortion_model = DistortionModel::kPlumbBob;
-  EXPECT_EQ(ErrorOf([&] { info.Validate(); }),
-            "probeless_msgs/CameraInfo 'cam': distortion model plumb_bob has 5 coefficients, "
-            "distortion_count is 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      info.Validate(), MessageError,
+      "probeless_msgs/CameraInfo 'cam': distortion model plumb_bob has 5 coefficients, "
+      "distortion_count is 0");
   info.distortion_count = 5;
   EXPECT_NO_THROW(info.Validate());
   EXPECT_EQ(DistortionCoefficientCount(DistortionModel::kRationalPolynomial), 8u);
   info.distortion_model = static_cast<DistortionModel>(3);
-  EXPECT_EQ(ErrorOf([&] { info.Validate(); }),
-            "probeless_msgs/CameraInfo 'cam': invalid distortion model 3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(info.Validate(), MessageError,
+                                  "probeless_msgs/CameraInfo 'cam': invalid distortion model 3");
   info.distortion_model = DistortionModel::kNone;
   info.distortion_count = 0;
   info.fx = 0;
-  EXPECT_EQ(ErrorOf([&] { info.Validate(); }),
-            "probeless_msgs/CameraInfo 'cam': fx and fy must be > 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(info.Validate(), MessageError,
+                                  "probeless_msgs/CameraInfo 'cam': fx and fy must be > 0");
 }
 
 TEST(PoseTest, TransformMapsChildPointsToParent) {
@@ -507,8 +516,9 @@ TEST(PoseTest, TransformMapsChildPointsToParent) {
   EXPECT_NEAR(q.x, 1.0, 1e-12);
   EXPECT_NEAR(q.y, 2.0, 1e-12);
   EXPECT_NEAR(q.z, 8.0, 1e-12);
-  EXPECT_EQ(ErrorOf([&] { pose.SetChildFrameId(std::string(40, 'c')); }),
-            "child_frame_id '" + std::string(40, 'c') + "' has 40 characters, at most 31 fit");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      pose.SetChildFrameId(std::string(40, 'c')), MessageError,
+      "child_frame_id '" + std::string(40, 'c') + "' has 40 characters, at most 31 fit");
 }
 
 // --- FaceObservation, ShLight ------------------------------------------------------------------
@@ -530,19 +540,21 @@ TEST(FaceObservationTest, ValidityBitsAndValidation) {
   EXPECT_EQ(face->ValidSampleCount(), 3u);
   EXPECT_NO_THROW(face->Validate());
   face->SetSampleValid(300, true);
-  EXPECT_EQ(ErrorOf([&] { face->Validate(); }),
-            "probeless_msgs/FaceObservation: sample 300 flagged valid but sample_count is 130");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      face->Validate(), MessageError,
+      "probeless_msgs/FaceObservation: sample 300 flagged valid but sample_count is 130");
   EXPECT_EQ(face->ValidSampleCount(), 3u);  // bits beyond sample_count do not count
-  EXPECT_EQ(ErrorOf([&] { face->SetSampleValid(512, true); }),
-            "probeless_msgs/FaceObservation: sample index 512 out of range (max 511)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      face->SetSampleValid(512, true), MessageError,
+      "probeless_msgs/FaceObservation: sample index 512 out of range (max 511)");
   face->SetSampleValid(300, false);
   face->landmark_count = 69;
-  EXPECT_EQ(ErrorOf([&] { face->Validate(); }),
-            "probeless_msgs/FaceObservation: landmark_count 69 exceeds 68");
+  PROBELESS_EXPECT_THROWS_MESSAGE(face->Validate(), MessageError,
+                                  "probeless_msgs/FaceObservation: landmark_count 69 exceeds 68");
   face->landmark_count = 68;
   face->quality = 1.5f;
-  EXPECT_EQ(ErrorOf([&] { face->Validate(); }),
-            "probeless_msgs/FaceObservation: quality must be in [0, 1]");
+  PROBELESS_EXPECT_THROWS_MESSAGE(face->Validate(), MessageError,
+                                  "probeless_msgs/FaceObservation: quality must be in [0, 1]");
 }
 
 TEST(ShLightTest, IndexingAndValidation) {
@@ -556,11 +568,11 @@ TEST(ShLightTest, IndexingAndValidation) {
   EXPECT_EQ(light.CoefficientCount(), 9u);
   EXPECT_NO_THROW(light.Validate());
   light.bands = 6;
-  EXPECT_EQ(ErrorOf([&] { light.Validate(); }),
-            "probeless_msgs/ShLight: bands 6 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(light.Validate(), MessageError,
+                                  "probeless_msgs/ShLight: bands 6 out of range 1..5");
   light.bands = 0;
-  EXPECT_EQ(ErrorOf([&] { light.Validate(); }),
-            "probeless_msgs/ShLight: bands 0 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(light.Validate(), MessageError,
+                                  "probeless_msgs/ShLight: bands 0 out of range 1..5");
 }
 
 TEST(ShLightTest, UnitsFieldReplacesTheReservedWord) {
@@ -580,12 +592,14 @@ TEST(ShLightTest, UnitsFieldReplacesTheReservedWord) {
   }
   light.units = static_cast<ShLightUnits>(4);
   EXPECT_EQ(ShLightUnitsName(light.units), "");
-  EXPECT_EQ(ErrorOf([&] { light.Validate(); }),
-            "probeless_msgs/ShLight: units 4 is not unknown (0), linear (1), face_model (2) or "
-            "linear_unscaled (3)");
-  EXPECT_EQ(ErrorOf([&] { ShLightUnitsFromName("gamma"); }),
-            "probeless_msgs/ShLight: units 'gamma' is not unknown, linear, face_model or "
-            "linear_unscaled");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      light.Validate(), MessageError,
+      "probeless_msgs/ShLight: units 4 is not unknown (0), linear (1), face_model (2) or "
+      "linear_unscaled (3)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ShLightUnitsFromName("gamma"), MessageError,
+      "probeless_msgs/ShLight: units 'gamma' is not unknown, linear, face_model or "
+      "linear_unscaled");
   // The bytes of a pre-field message (reserved0 = 0 at offset 60) read as kUnknown.
   alignas(64) std::byte bytes[sizeof(ShLight)] = {};
   EXPECT_EQ(ReadMessage<ShLight>(std::span<const std::byte>(bytes))->units, ShLightUnits::kUnknown);
@@ -624,19 +638,23 @@ TEST(GeometryBufferTest, StandardLayoutPlanesAreAlignedAndDisjoint) {
 TEST(GeometryBufferTest, RejectsShortPayloadOverlapAndMisalignment) {
   GeometryBuffer g;
   g.Init(5, 3);
-  EXPECT_EQ(ErrorOf([&] { g.Validate(300); }),
-            "probeless_msgs/GeometryBuffer 5x3: colour plane (offset 256, 45 bytes) exceeds the "
-            "payload of 300 bytes");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      g.Validate(300), MessageError,
+      "probeless_msgs/GeometryBuffer 5x3: colour plane (offset 256, 45 bytes) exceeds the "
+      "payload of 300 bytes");
   g.normals_offset = 32;
-  EXPECT_EQ(ErrorOf([&] { g.Validate(1000); }),
-            "probeless_msgs/GeometryBuffer 5x3: depth and normals planes overlap");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      g.Validate(1000), MessageError,
+      "probeless_msgs/GeometryBuffer 5x3: depth and normals planes overlap");
   g.normals_offset = 66;
-  EXPECT_EQ(ErrorOf([&] { g.Validate(1000); }),
-            "probeless_msgs/GeometryBuffer 5x3: depth and normals offsets must be multiples of 4");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      g.Validate(1000), MessageError,
+      "probeless_msgs/GeometryBuffer 5x3: depth and normals offsets must be multiples of 4");
   g.normals_offset = ~uint64_t{0} - 3;  // would wrap around in a naive end computation
-  EXPECT_EQ(ErrorOf([&] { g.Validate(1000); }),
-            "probeless_msgs/GeometryBuffer 5x3: normals plane (offset 18446744073709551612, 180 "
-            "bytes) exceeds the payload of 1000 bytes");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      g.Validate(1000), MessageError,
+      "probeless_msgs/GeometryBuffer 5x3: normals plane (offset 18446744073709551612, 180 "
+      "bytes) exceeds the payload of 1000 bytes");
 }
 
 // --- AuxiliaryViews
@@ -688,8 +706,8 @@ TEST(AuxiliaryViewsTest, RoundTripThroughASlot) {
   EXPECT_EQ(in->views[0].rotation[2], 1.0f);
   EXPECT_EQ(AuxiliaryDepth(*in, in.payload, 0)[14], 14.5f);
   EXPECT_EQ(AuxiliaryDepth(*in, in.payload, 1)[15], 17.0f);
-  EXPECT_EQ(ErrorOf([&] { AuxiliaryDepth(*in, in.payload, 2); }),
-            "probeless_msgs/AuxiliaryViews: view 2 of 2");
+  PROBELESS_EXPECT_THROWS_MESSAGE(AuxiliaryDepth(*in, in.payload, 2), MessageError,
+                                  "probeless_msgs/AuxiliaryViews: view 2 of 2");
   EXPECT_NE(AuxiliaryViews::LayoutDescription().find(
                 "role:AuxiliaryViewRole{invalid=0,left=1,right=2,top=3,light=4}:u32@0"),
             std::string::npos);
@@ -700,44 +718,53 @@ TEST(AuxiliaryViewsTest, MalformedMessagesAreRejectedWithOneLine) {
   FillTwoViews(a);
   const size_t bytes = a.PayloadBytes();
   EXPECT_NO_THROW(a.Validate(bytes));
-  EXPECT_EQ(ErrorOf([&] { a.Validate(bytes - 1); }),
-            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset 64, 64 bytes) "
-            "exceeds the payload of 127 bytes");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      a.Validate(bytes - 1), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset 64, 64 bytes) "
+      "exceeds the payload of 127 bytes");
   AuxiliaryViews b = a;
   b.view_count = 5;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews: view_count 5 exceeds 4");
+  PROBELESS_EXPECT_THROWS_MESSAGE(b.Validate(bytes), MessageError,
+                                  "probeless_msgs/AuxiliaryViews: view_count 5 exceeds 4");
   b = a;
   b.views[1].role = static_cast<AuxiliaryViewRole>(9);
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 1 (invalid 4x4): unknown role 9");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (invalid 4x4): unknown role 9");
   b = a;
   b.views[0].width = 0;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 0 (left 0x3): width and height must be in 1..4096");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 0 (left 0x3): width and height must be in 1..4096");
   b = a;
   b.views[0].pixel_size_m = std::nanf("");
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 0 (left 5x3): pixel_size_m must be finite and > 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 0 (left 5x3): pixel_size_m must be finite and > 0");
   b = a;
   b.views[0].rotation[0] = 0.5f;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 0 (left 5x3): rotation is not orthonormal");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 0 (left 5x3): rotation is not orthonormal");
   b = a;
   b.views[1].translation[1] = INFINITY;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): non-finite translation");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (top 4x4): non-finite translation");
   b = a;
   b.views[1].depth_offset = 32;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane overlaps view 0's");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane overlaps view 0's");
   b.views[1].depth_offset = 66;
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth offset must be a multiple of 4");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth offset must be a multiple of 4");
   b.views[1].depth_offset = ~uint64_t{0} - 3;  // would wrap around in a naive end computation
-  EXPECT_EQ(ErrorOf([&] { b.Validate(bytes); }),
-            "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset "
-            "18446744073709551612, 64 bytes) exceeds the payload of 128 bytes");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      b.Validate(bytes), MessageError,
+      "probeless_msgs/AuxiliaryViews view 1 (top 4x4): depth plane (offset "
+      "18446744073709551612, 64 bytes) exceeds the payload of 128 bytes");
   b.view_count = 0;  // no views: valid, empty payload
   EXPECT_NO_THROW(b.Validate(0));
 }
@@ -755,14 +782,17 @@ TEST(TransferBufferTest, SizesIndexingAndErrors) {
   ASSERT_EQ(pixel.size(), 16u);
   EXPECT_EQ(pixel[0], static_cast<float>((1 * 4 + 2) * 16));
   EXPECT_EQ(pixel[15], static_cast<float>((1 * 4 + 2) * 16 + 15));
-  EXPECT_EQ(ErrorOf([&] { PixelTransfer(*in, in.payload, 4, 0); }),
-            "probeless_msgs/TransferBuffer: pixel (4, 0) outside 4x3");
-  EXPECT_EQ(ErrorOf([&] { TransferCoefficients(*in, in.payload.first(100)); }),
-            "probeless_msgs/TransferBuffer 4x3 x 16 needs 768 payload bytes, got 100");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PixelTransfer(*in, in.payload, 4, 0), MessageError,
+                                  "probeless_msgs/TransferBuffer: pixel (4, 0) outside 4x3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      TransferCoefficients(*in, in.payload.first(100)), MessageError,
+      "probeless_msgs/TransferBuffer 4x3 x 16 needs 768 payload bytes, got 100");
   TransferBuffer t;
-  EXPECT_EQ(ErrorOf([&] { t.Init(4, 3, 10); }),
-            "probeless_msgs/TransferBuffer: coefficient_count 10 is not 1, 4, 9, 16 or 25");
-  EXPECT_EQ(ErrorOf([&] { t.Validate(0); }), "probeless_msgs/TransferBuffer 0x0: unknown layout 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      t.Init(4, 3, 10), MessageError,
+      "probeless_msgs/TransferBuffer: coefficient_count 10 is not 1, 4, 9, 16 or 25");
+  PROBELESS_EXPECT_THROWS_MESSAGE(t.Validate(0), MessageError,
+                                  "probeless_msgs/TransferBuffer 0x0: unknown layout 0");
 }
 
 }  // namespace

@@ -5,11 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <functional>
 #include <numbers>
 #include <opencv2/core.hpp>
 #include <string>
 
+#include "probeless/testing/expect.h"
 #include "probeless/testing/testing.h"
 
 namespace {
@@ -28,16 +28,6 @@ Intrinsics Sample() {
           241.5,
           msgs::DistortionModel::kPlumbBob,
           {0.1, -0.2, 0.001, 0.002, 0.05}};
-}
-
-// The what() of the CalibrationError `action` throws, or "no error".
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const CalibrationError& e) {
-    return e.what();
-  }
-  return "no error";
 }
 
 TEST(CalibrationTest, RosYamlRoundTrip) {
@@ -74,13 +64,15 @@ TEST(CalibrationTest, RosYamlDistortionCounts) {
   EXPECT_EQ(ReadCalibrationFile(path).model, msgs::DistortionModel::kRationalPolynomial);
   WriteText(path, k + "distortion_model: rational_polynomial\n"
                       "distortion_coefficients: {rows: 1, cols: 5, data: [1, 2, 3, 4, 5]}\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(path); }),
-            "calibration file '" + path + "': rational_polynomial needs 8 distortion coefficients");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path + "': rational_polynomial needs 8 distortion coefficients");
   WriteText(path, k + "distortion_coefficients: {rows: 1, cols: 3, data: [1, 2, 3]}\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(path); }),
-            "calibration file '" + path +
-                "' has 3 distortion coefficients: expected 0, 4, 5 (plumb_bob) or 8 "
-                "(rational_polynomial)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path +
+          "' has 3 distortion coefficients: expected 0, 4, 5 (plumb_bob) or 8 "
+          "(rational_polynomial)");
 }
 
 TEST(CalibrationTest, OpenCvFileStorageYamlAndXml) {
@@ -116,44 +108,51 @@ TEST(CalibrationTest, OpenCvFileStorageYamlAndXml) {
 TEST(CalibrationTest, BadFilesGiveOneLine) {
   TempDir dir("probeless_calib");
   const std::string missing = dir.File("missing.yaml");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(missing); }),
-            "cannot read calibration file '" + missing + "'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ReadCalibrationFile(missing), CalibrationError,
+                                  "cannot read calibration file '" + missing + "'");
   const std::string path = dir.File("bad.yaml");
   WriteText(path, "camera_matrix: {rows: 3, cols: 3, data: [1, 2, 3]}\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(path); }),
-            "calibration file '" + path + "': camera matrix has 3 entries, expected 9 (3x3)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path + "': camera matrix has 3 entries, expected 9 (3x3)");
   WriteText(path, "camera_matrix: {rows: 3, cols: 3, data: [0, 0, 2, 0, 1, 2, 0, 0, 1]}\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(path); }),
-            "calibration file '" + path + "': camera matrix must have positive focal lengths fx, fy");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path + "': camera matrix must have positive focal lengths fx, fy");
   WriteText(path, "- 1\n- 2\n");
-  EXPECT_EQ(
-      ErrorOf([&] { ReadCalibrationFile(path); }),
-      "calibration file '" + path + "': expected a ROS camera_info YAML mapping (camera_matrix, ...)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path +
+          "': expected a ROS camera_info YAML mapping (camera_matrix, ...)");
   WriteText(path, "image_width: 40\n");
-  EXPECT_EQ(
-      ErrorOf([&] { ReadCalibrationFile(path); }),
-      "calibration file '" + path + "': missing camera_matrix (expected a ROS camera_info YAML file)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path +
+          "': missing camera_matrix (expected a ROS camera_info YAML file)");
   WriteText(path,
             "image_width: 40.5\n"
             "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0, 1]}\n");
-  EXPECT_EQ(
-      ErrorOf([&] { ReadCalibrationFile(path); }),
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
       "calibration file '" + path + "': image_width must be a non-negative whole number of pixels");
   WriteText(path, "camera_matrix: [1, 2]\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(path); }),
-            "calibration file '" + path + "': camera_matrix needs a data list");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(path), CalibrationError,
+      "calibration file '" + path + "': camera_matrix needs a data list");
   const std::string xml = dir.File("bad.xml");
   WriteText(xml,
             "<?xml version=\"1.0\"?>\n<opencv_storage>\n"
             "<image_width>20</image_width></opencv_storage>\n");
-  EXPECT_EQ(ErrorOf([&] { ReadCalibrationFile(xml); }),
-            "calibration file '" + xml +
-                "': missing camera_matrix (or cameraMatrix, K) in OpenCV FileStorage file");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ReadCalibrationFile(xml), CalibrationError,
+      "calibration file '" + xml +
+          "': missing camera_matrix (or cameraMatrix, K) in OpenCV FileStorage file");
   const std::string unwritable = dir.File("no/such/folder") + "/cam.yaml";
   std::filesystem::remove_all(dir.File("no"));
-  EXPECT_EQ(ErrorOf([&] { WriteCameraInfoYaml(unwritable, Sample(), "x"); }),
-            "calibration file '" + unwritable +
-                "' cannot be written (check the folder exists and is writable)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      WriteCameraInfoYaml(unwritable, Sample(), "x"), CalibrationError,
+      "calibration file '" + unwritable +
+          "' cannot be written (check the folder exists and is writable)");
 }
 
 TEST(CalibrationTest, FieldOfViewGuessScalingAndCameraInfo) {
@@ -163,8 +162,8 @@ TEST(CalibrationTest, FieldOfViewGuessScalingAndCameraInfo) {
   EXPECT_EQ(guess.cx, 319.5);
   EXPECT_EQ(guess.cy, 239.5);
   EXPECT_EQ(guess.model, msgs::DistortionModel::kNone);
-  EXPECT_EQ(ErrorOf([] { IntrinsicsFromFieldOfView(640, 480, 180); }),
-            "field of view 180.000000 deg is outside (0, 180)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(IntrinsicsFromFieldOfView(640, 480, 180), CalibrationError,
+                                  "field of view 180.000000 deg is outside (0, 180)");
 
   const Intrinsics half = ScaleIntrinsics(Sample(), 320, 240);
   EXPECT_DOUBLE_EQ(half.fx, 525.5 / 2);

@@ -8,6 +8,7 @@
 
 #include "probeless/eval/metrics.h"
 #include "probeless/eval/scene_folder.h"
+#include "probeless/testing/expect.h"
 #include "probeless/testing/testing.h"
 
 namespace probeless::eval {
@@ -17,15 +18,6 @@ std::string Write(const testing::TempDir& dir, const std::string& name, const st
   const std::string path = dir.path() + "/" + name;
   std::ofstream(path) << text;
   return path;
-}
-
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const EvalError& e) {
-    return e.what();
-  }
-  return "(no error)";
 }
 
 TEST(InsertionTest, ReadsSpheresAndBoxes) {
@@ -56,7 +48,8 @@ TEST(InsertionTest, ErrorsNameFileLineAndField) {
   testing::TempDir dir("eval");
   auto error = [&](const std::string& text) {
     const std::string path = Write(dir, "insertion.yaml", text);
-    return ErrorOf([&] { LoadInsertion(path, "scene/insertion.yaml"); });
+    return probeless::testing::ThrownMessage<EvalError>(
+        [&] { LoadInsertion(path, "scene/insertion.yaml"); });
   };
   EXPECT_EQ(error("objects:\n  - shape: sphere\n    position: [0, 0, 1]\n    radius: abc\n"),
             "scene/insertion.yaml:4: objects[0].radius: expected a positive number, got 'abc'");
@@ -73,8 +66,8 @@ TEST(InsertionTest, ErrorsNameFileLineAndField) {
                   "    albedo: [0.5, 2, 0.5]\n"),
             "scene/insertion.yaml:5: objects[0].albedo: expected 3 numbers [r, g, b] in [0, 1], "
             "got '2' at index 1");
-  EXPECT_EQ(ErrorOf([&] { LoadInsertion(dir.path() + "/none.yaml", "x/insertion.yaml"); }),
-            "x/insertion.yaml: cannot open");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadInsertion(dir.path() + "/none.yaml", "x/insertion.yaml"),
+                                  EvalError, "x/insertion.yaml: cannot open");
 }
 
 TEST(TruthTest, ReadsFramesAndFindsThemByStamp) {
@@ -107,8 +100,9 @@ TEST(TruthTest, ReadsFramesAndFindsThemByStamp) {
   const std::string bad = Write(dir, "bad.json",
                                 "{\"frames\": [\n {\"timestamp\": \"1.0\",\n"
                                 "  \"sh_camera\": [[1, 2, 3]]}]}\n");
-  EXPECT_EQ(ErrorOf([&] { LoadTruth(bad, "s/truth.json"); }),
-            "s/truth.json:3: frames[0].sh_camera: expected 9 [r, g, b] coefficients, got 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadTruth(bad, "s/truth.json"), EvalError,
+      "s/truth.json:3: frames[0].sh_camera: expected 9 [r, g, b] coefficients, got 1");
 }
 
 TEST(RgbListTest, SortsAndConvertsStampsExactly) {
@@ -128,8 +122,9 @@ TEST(RgbListTest, SortsAndConvertsStampsExactly) {
   EXPECT_FALSE(ParseStampNs("13000000000"));
   EXPECT_FALSE(ParseStampNs("99999999999999999999999"));
   Write(dir, "rgb.txt", "1.0 rgb/a.png extra\n");
-  EXPECT_EQ(ErrorOf([&] { LoadRgbList(path, "s/rgb.txt"); }),
-            "s/rgb.txt:1: expected 'timestamp filename', got '1.0 rgb/a.png extra'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadRgbList(path, "s/rgb.txt"), EvalError,
+      "s/rgb.txt:1: expected 'timestamp filename', got '1.0 rgb/a.png extra'");
 }
 
 LinearImage Constant(int w, int h, float v) {

@@ -9,7 +9,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -23,20 +22,12 @@
 #include "probeless/face_light/yaleb.h"
 #include "probeless/msgs/sh_light.h"
 #include "probeless/sh/sh.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::face_light {
 namespace {
 
 using Rtf = std::array<double, kRtfCoefficients>;
-
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const FaceLightError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
 
 double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
@@ -116,12 +107,12 @@ TEST(FaceFrameTest, NormalisedCoordinatesAndSimilarity) {
   EXPECT_NEAR(fitted.tx, truth.tx, 1e-7);
   EXPECT_NEAR(fitted.ty, truth.ty, 1e-7);
   EXPECT_NEAR(fitted.Scale(), 1.5, 1e-9);
-  EXPECT_EQ(
-      ErrorOf([&] { FitSimilarity(std::span(canonical).first(1), std::span(live).first(1)); }),
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FitSimilarity(std::span(canonical).first(1), std::span(live).first(1)), FaceLightError,
       "FitSimilarity: need the same number (>= 2) of points, got 1 and 1");
   const std::vector<Point2> same = {{1, 1}, {1, 1}};
-  EXPECT_EQ(ErrorOf([&] { FitSimilarity(same, same); }),
-            "FitSimilarity: source points are all equal");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FitSimilarity(same, same), FaceLightError,
+                                  "FitSimilarity: source points are all equal");
 }
 
 TEST(FaceFrameTest, SamplePatchesAveragesBoxesAndFlagsInvalid) {
@@ -152,12 +143,10 @@ TEST(FaceFrameTest, SamplePatchesAveragesBoxesAndFlagsInvalid) {
   SamplePatches(big.data(), 400, 400, 400, 1, twice, std::span(positions).first(1), 2, 256,
                 std::span(values).first(1), std::span(valid).first(1));
   EXPECT_NEAR(values[0], 40 / 255.0, 0.5 / 255);
-  EXPECT_EQ(ErrorOf([&] {
-              SamplePatches(image.data(), kCropWidth, kCropHeight, kCropWidth, 1,
-                            SimilarityTransform{}, positions, 2, 255, std::span(values).first(2),
-                            valid);
-            }),
-            "SamplePatches: 3 positions need 3 values and 3 flags, got 2 and 3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      SamplePatches(image.data(), kCropWidth, kCropHeight, kCropWidth, 1, SimilarityTransform{},
+                    positions, 2, 255, std::span(values).first(2), valid),
+      FaceLightError, "SamplePatches: 3 positions need 3 values and 3 flags, got 2 and 3");
 }
 
 TEST(TrainingTest, CandidateGridHas512PointsInsideTheMask) {
@@ -173,8 +162,8 @@ TEST(TrainingTest, CandidateGridHas512PointsInsideTheMask) {
                  ey = (px.y - kCanonicalRightEye.y + 4) / 17;
     EXPECT_GT(ex * ex + ey * ey, 1);
   }
-  EXPECT_EQ(ErrorOf([] { CandidatePositions(1); }),
-            "CandidatePositions: step_px 1.000000 out of range 2..40");
+  PROBELESS_EXPECT_THROWS_MESSAGE(CandidatePositions(1), FaceLightError,
+                                  "CandidatePositions: step_px 1.000000 out of range 2..40");
 }
 
 // Synthetic training set: every person sees every one of 40 light directions; intensity =
@@ -267,14 +256,17 @@ TEST(TrainingTest, TrainPacksTheModelAndRejectsBadInput) {
   EXPECT_EQ(model.training.candidates, 60);
   EXPECT_EQ(progress.back(), 1.0);
   std::vector<TrainingImage> no_front(images.begin() + 1, images.begin() + 40);
-  EXPECT_EQ(ErrorOf([&] { FitRtfs(no_front, nullptr); }),
-            "face_light training: subject 1 has no frontal-lit image (azimuth 0, elevation 0)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FitRtfs(no_front, nullptr), FaceLightError,
+      "face_light training: subject 1 has no frontal-lit image (azimuth 0, elevation 0)");
   std::vector<TrainingImage> few(images.begin(), images.begin() + 5);
-  EXPECT_EQ(ErrorOf([&] { FitRtfs(few, nullptr); }),
-            "face_light training: candidate 0 has 5 valid equations and no unique RTF (need 9 "
-            "independent lights)");
-  EXPECT_EQ(ErrorOf([&] { Train(std::span(candidates).first(10), images, options); }),
-            "face_light training: images have 60 values but there are 10 candidates");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FitRtfs(few, nullptr), FaceLightError,
+      "face_light training: candidate 0 has 5 valid equations and no unique RTF (need 9 "
+      "independent lights)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      Train(std::span(candidates).first(10), images, options), FaceLightError,
+      "face_light training: images have 60 values but there are 10 candidates");
 }
 
 TEST(EstimatorTest, GrayRecoversAKnownLightExactly) {
@@ -329,12 +321,13 @@ TEST(EstimatorTest, RgbWithInvalidSamplesUsesTheFastDowndate) {
   std::vector<uint64_t> few(8, 0);
   few[0] = 0xff;
   EXPECT_EQ(estimator.EstimateGray(gray, few).channels, 0);
-  EXPECT_EQ(ErrorOf([&] { estimator.EstimateGray(std::span(gray).first(10)); }),
-            "FaceLightEstimator: 10 intensities, the model has 294 samples");
-  EXPECT_EQ(ErrorOf([&] { estimator.EstimateRgb(gray); }),
-            "FaceLightEstimator: 294 RGB values, expected 3 x 294 samples");
-  EXPECT_EQ(ErrorOf([&] { estimator.EstimateGray(gray, std::span(valid).first(2)); }),
-            "FaceLightEstimator: 2 validity words cover fewer than 294 samples");
+  PROBELESS_EXPECT_THROWS_MESSAGE(estimator.EstimateGray(std::span(gray).first(10)), FaceLightError,
+                                  "FaceLightEstimator: 10 intensities, the model has 294 samples");
+  PROBELESS_EXPECT_THROWS_MESSAGE(estimator.EstimateRgb(gray), FaceLightError,
+                                  "FaceLightEstimator: 294 RGB values, expected 3 x 294 samples");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      estimator.EstimateGray(gray, std::span(valid).first(2)), FaceLightError,
+      "FaceLightEstimator: 2 validity words cover fewer than 294 samples");
 }
 
 // The residual statistics come from coefficient space on the fast paths (closed form with the
@@ -443,21 +436,24 @@ TEST(EstimatorTest, PriorAndNonNegativeModes) {
   EXPECT_LT(AngleDeg(positive.dominant_direction, YaleBLightDirection(30, 20)), 3.0);
   EXPECT_LT(positive.rms_residual, 1e-3);
   EXPECT_NEAR(positive.coefficients[0][0], light[0], 0.1 * light[0]);
-  EXPECT_EQ(ErrorOf([&] {
-              EstimatorOptions bad;
-              bad.ridge = -1;
-              FaceLightEstimator(model, bad);
-            }),
-            "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
-            "direction_ridge, directional_robust >= 0; robust_iterations 1..20; "
-            "robust_threshold > 0; nn_directions 9..1024; nn_iterations 1..10000; "
-            "directional_grid 0..1024; directional_iterations 0..100; mask_cache 0..64)");
-  EXPECT_NE(ErrorOf([&] {
-              EstimatorOptions bad;
-              bad.mask_cache = 65;
-              FaceLightEstimator(model, bad);
-            }),
-            "(no error)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        EstimatorOptions bad;
+        bad.ridge = -1;
+        FaceLightEstimator(model, bad);
+      },
+      FaceLightError,
+      "FaceLightEstimator: options out of range (ridge, back_prior, weight_floor, "
+      "direction_ridge, directional_robust >= 0; robust_iterations 1..20; "
+      "robust_threshold > 0; nn_directions 9..1024; nn_iterations 1..10000; "
+      "directional_grid 0..1024; directional_iterations 0..100; mask_cache 0..64)");
+  EXPECT_THROW(
+      {
+        EstimatorOptions bad;
+        bad.mask_cache = 65;
+        FaceLightEstimator(model, bad);
+      },
+      FaceLightError);
 }
 
 // Direction RTFs of `bands` bands for the synthetic normals of SyntheticRtfs(count, seed): the
@@ -828,7 +824,7 @@ TEST_F(ModelFileTest, CorruptFilesGiveOneLineErrors) {
     return text;
   };
   const auto error = [](const std::string& text) {
-    return ErrorOf([&] { ParseModel(text, "m.model"); });
+    return probeless::testing::ThrownMessage<FaceLightError>([&] { ParseModel(text, "m.model"); });
   };
   EXPECT_EQ(error("hello\n"),
             "m.model: line 1: not a face_light model (expected magic "
@@ -859,8 +855,8 @@ TEST_F(ModelFileTest, CorruptFilesGiveOneLineErrors) {
             "m.model: line 12: bad training_images 'many' (expected an integer)");
   EXPECT_EQ(error(replace("end\n", "")),
             "m.model: line 20: unexpected end of file, expected 'end' (truncated?)");
-  EXPECT_EQ(ErrorOf([&] { LoadModel((dir_ / "missing.model").string()); }),
-            (dir_ / "missing.model").string() + ": cannot open model file");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadModel((dir_ / "missing.model").string()), FaceLightError,
+                                  (dir_ / "missing.model").string() + ": cannot open model file");
 }
 
 TEST(YaleBNameTest, ParsesFileNamesAndSubjectLists) {
@@ -874,10 +870,12 @@ TEST(YaleBNameTest, ParsesFileNamesAndSubjectLists) {
   // Positive azimuth: light from the subject's right = image left = -x.
   EXPECT_NEAR(YaleBLightDirection(90, 0)[0], -1, 1e-12);
   EXPECT_EQ(ParseSubjectList("1-3,7,2"), (std::vector<int>{1, 2, 3, 7}));
-  EXPECT_EQ(ErrorOf([] { ParseSubjectList("1-x"); }),
-            "bad subject list '1-x' (expected e.g. 1-28 or 1,3,5-7 with numbers 1..99)");
-  EXPECT_EQ(ErrorOf([] { ListYaleBSubjects("/nonexistent/yaleb"); }),
-            "/nonexistent/yaleb: not a directory (expected the Yale B folder with yaleBxx/)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ParseSubjectList("1-x"), FaceLightError,
+      "bad subject list '1-x' (expected e.g. 1-28 or 1,3,5-7 with numbers 1..99)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ListYaleBSubjects("/nonexistent/yaleb"), FaceLightError,
+      "/nonexistent/yaleb: not a directory (expected the Yale B folder with yaleBxx/)");
 }
 
 }  // namespace

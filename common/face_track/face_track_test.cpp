@@ -19,6 +19,7 @@
 #include "probeless/face_track/light_output.h"
 #include "probeless/face_track/sampling.h"
 #include "probeless/sh/sh.h"
+#include "probeless/testing/expect.h"
 
 namespace {
 
@@ -26,50 +27,48 @@ using namespace probeless;
 using namespace probeless::face_track;
 namespace fl = probeless::face_light;
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "";
-}
-
 TEST(FaceTracker, BadModelPathsAreClearErrors) {
   TrackerOptions o;
   o.shape_predictor_path = "/nonexistent/sp.dat";
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
-            "shape predictor model '/nonexistent/sp.dat' not found (install the Debian package "
-            "libdlib-data, or set shape_predictor_path)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FaceTracker t(o), FaceTrackError,
+      "shape predictor model '/nonexistent/sp.dat' not found (install the Debian package "
+      "libdlib-data, or set shape_predictor_path)");
   o = {};
   o.backend = DetectorBackend::kHaar;
   o.haar_cascade_path = "/nonexistent/haar.xml";
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
-            "Haar cascade model '/nonexistent/haar.xml' not found (install the Debian package "
-            "opencv-data, or set haar_cascade_path)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FaceTracker t(o), FaceTrackError,
+      "Haar cascade model '/nonexistent/haar.xml' not found (install the Debian package "
+      "opencv-data, or set haar_cascade_path)");
   o = {};
   o.backend = DetectorBackend::kYuNet;
   o.yunet_model_path = "/nonexistent/yunet.onnx";
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }),
-            "YuNet model '/nonexistent/yunet.onnx' not found (set yunet_model_path to an ONNX "
-            "YuNet model)");
-  EXPECT_EQ(ErrorOf([] { BackendFromName("mtcnn"); }),
-            "unknown face detector backend 'mtcnn' (expected dlib, yunet or haar)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      FaceTracker t(o), FaceTrackError,
+      "YuNet model '/nonexistent/yunet.onnx' not found (set yunet_model_path to an ONNX "
+      "YuNet model)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      BackendFromName("mtcnn"), FaceTrackError,
+      "unknown face detector backend 'mtcnn' (expected dlib, yunet or haar)");
   o = {};
   o.redetect_period = 0;
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "redetect_period must be >= 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FaceTracker t(o), FaceTrackError, "redetect_period must be >= 1");
   o = {};
   o.flow_min_points = 2;
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "flow_min_points must be in 3..51");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FaceTracker t(o), FaceTrackError,
+                                  "flow_min_points must be in 3..51");
   o = {};
   o.flow_agreement = 0;
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "flow_agreement must be > 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FaceTracker t(o), FaceTrackError, "flow_agreement must be > 0");
   o = {};
   o.max_undetected_frames = 0;
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "max_undetected_frames must be >= 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FaceTracker t(o), FaceTrackError,
+                                  "max_undetected_frames must be >= 1");
   o = {};
   o.clahe_clip_limit = -1;
-  EXPECT_EQ(ErrorOf([&] { FaceTracker t(o); }), "clahe_clip_limit must be >= 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(FaceTracker t(o), FaceTrackError,
+                                  "clahe_clip_limit must be >= 0");
 }
 
 // Projects the generic model with a known pose; EstimateHeadPose recovers it.
@@ -293,14 +292,11 @@ TEST(LightOutput, JsonLayouts) {
   const auto colour = LightColour(c);
   EXPECT_NEAR(colour[0] + colour[1] + colour[2], 3, 1e-5);
   // A light in the face model's compressed units is not exported as radiance.
-  try {
-    LightJson(c, {0, 0, -1}, 2.5f, 0.75f, colour, 42, "camera", msgs::ShLightUnits::kFaceModel);
-    FAIL() << "no exception";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_STREQ(e.what(),
-                 "LightJson: the ARKit and WebXR exports take linear radiance, got face_model "
-                 "units");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LightJson(c, (std::array<float, 3>{0, 0, -1}), 2.5f, 0.75f, colour, 42, "camera",
+                msgs::ShLightUnits::kFaceModel),
+      std::invalid_argument,
+      "LightJson: the ARKit and WebXR exports take linear radiance, got face_model units");
 }
 
 // The numbers after `key` in json: the arrays' values in order (nested brackets flattened).
@@ -453,8 +449,9 @@ TEST(LightHold, BacklitFaceDoesNotBrightenTheVirtualObject) {
   EXPECT_TRUE(c.held);
   EXPECT_FLOAT_EQ(c.coefficients[0][1], wrong[0][1]);
   for (int n = 1; n < 9; ++n) EXPECT_EQ(c.coefficients[n][0], 0.f);
-  EXPECT_EQ(ErrorOf([] { LightHold bad(HoldOptions{.min_confidence = 0.1, .blend_time_s = 0}); }),
-            "LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LightHold bad(HoldOptions{.min_confidence = 0.1, .blend_time_s = 0}), std::invalid_argument,
+      "LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include "probeless/light/transfer.h"
 #include "probeless/sim/scenario.h"
 #include "probeless/sim/simulator.h"
+#include "probeless/testing/expect.h"
 
 namespace {
 
@@ -41,16 +42,6 @@ objects:
 lights:
   - {name: sun, type: directional, direction: [0.5, 1.0, -0.4], color: [1, 1, 1], intensity: 2.5}
 )";
-
-template <class Fn>
-std::string ErrorOf(Fn fn) {
-  try {
-    fn();
-  } catch (const light::LightError& e) {
-    return e.what();
-  }
-  return "";
-}
 
 double AngleDeg(const light::Vec3f& a, const raytrace::Vec3& b) {
   const double dot = a[0] * b.x + a[1] * b.y + a[2] * b.z;
@@ -162,8 +153,9 @@ TEST(LightSim, SurfaceTruthOfAPointLampDiffersFromTheLightAtTheCamera) {
   EXPECT_LT(from_surfaces, 25.0);
   EXPECT_GT(between, 20.0);
   EXPECT_GT(truth.dominant_irradiance, 0.0f);
-  EXPECT_EQ(ErrorOf([&] { light::SurfaceLightingTruth(lamp_sim.scene(), f, 0); }),
-            "light::SurfaceLightingTruth: stride must be >= 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(light::SurfaceLightingTruth(lamp_sim.scene(), f, 0),
+                                  light::LightError,
+                                  "light::SurfaceLightingTruth: stride must be >= 1");
 }
 
 }  // namespace

@@ -6,10 +6,11 @@
 
 #include <cmath>
 #include <cstdint>
-#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
+
+#include "probeless/testing/expect.h"
 
 namespace probeless::log {
 namespace {
@@ -26,15 +27,6 @@ std::vector<std::byte> AsBytes(const std::vector<uint8_t>& ints) {
   std::vector<std::byte> out;
   for (uint8_t v : ints) out.push_back(std::byte{v});
   return out;
-}
-
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const CdrError& error) {
-    return error.what();
-  }
-  return "(no error)";
 }
 
 TEST(CdrWriterTest, EncapsulationHeaderIsLittleEndianXcdr1) {
@@ -134,77 +126,82 @@ TEST(CdrRoundTripTest, EveryTypeComesBack) {
 }
 
 TEST(CdrReaderTest, RejectsOtherEncapsulations) {
-  EXPECT_EQ(ErrorOf([] {
-              CdrReader(AsBytes({0x00, 0x00, 0x00, 0x00}), "pkg/T");
-            }),
-            "CDR pkg/T: encapsulation 0x0000 (big-endian CDR) is not supported");
-  EXPECT_EQ(ErrorOf([] {
-              CdrReader(AsBytes({0x00, 0x07, 0x00, 0x00}), "pkg/T");
-            }),
-            "CDR pkg/T: encapsulation 0x0007 is not supported (expected 0x0001, little-endian "
-            "XCDR1)");
-  EXPECT_EQ(ErrorOf([] {
-              CdrReader(AsBytes({0x00, 0x01}), "pkg/T");
-            }),
-            "CDR pkg/T: 2 bytes are too few for the encapsulation header");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      CdrReader(AsBytes({0x00, 0x00, 0x00, 0x00}), "pkg/T"), CdrError,
+      "CDR pkg/T: encapsulation 0x0000 (big-endian CDR) is not supported");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      CdrReader(AsBytes({0x00, 0x07, 0x00, 0x00}), "pkg/T"), CdrError,
+      "CDR pkg/T: encapsulation 0x0007 is not supported (expected 0x0001, little-endian "
+      "XCDR1)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(CdrReader(AsBytes({0x00, 0x01}), "pkg/T"), CdrError,
+                                  "CDR pkg/T: 2 bytes are too few for the encapsulation header");
 }
 
 TEST(CdrReaderTest, OutOfBoundsAndMalformedFieldsNameFieldAndOffset) {
   const std::vector<std::byte> short_u64 = AsBytes({0x00, 0x01, 0x00, 0x00, 1, 2, 3});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(short_u64, "pkg/T");
-              reader.Read<uint64_t>("stamp");
-            }),
-            "CDR pkg/T: field 'stamp' at offset 4: 8 bytes needed, only 3 left");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(short_u64, "pkg/T");
+        reader.Read<uint64_t>("stamp");
+      },
+      CdrError, "CDR pkg/T: field 'stamp' at offset 4: 8 bytes needed, only 3 left");
 
   // The padding itself runs past the end.
   const std::vector<std::byte> padding = AsBytes({0x00, 0x01, 0x00, 0x00, 1, 2});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(padding, "pkg/T");
-              reader.Read<uint8_t>("a");
-              reader.Read<uint64_t>("b");
-            }),
-            "CDR pkg/T: field 'b' at offset 6: alignment padding runs past the end of the "
-            "6-byte buffer");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(padding, "pkg/T");
+        reader.Read<uint8_t>("a");
+        reader.Read<uint64_t>("b");
+      },
+      CdrError,
+      "CDR pkg/T: field 'b' at offset 6: alignment padding runs past the end of the "
+      "6-byte buffer");
 
   const std::vector<std::byte> huge_sequence =
       AsBytes({0x00, 0x01, 0x00, 0x00, 0xFF, 0xFF, 0xFF, 0xFF, 1, 2, 3, 4});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(huge_sequence, "pkg/T");
-              reader.Sequence<double>("d");
-            }),
-            "CDR pkg/T: field 'd' at offset 12: 34359738360 bytes needed, only 0 left");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(huge_sequence, "pkg/T");
+        reader.Sequence<double>("d");
+      },
+      CdrError, "CDR pkg/T: field 'd' at offset 12: 34359738360 bytes needed, only 0 left");
 
   const std::vector<std::byte> no_nul =
       AsBytes({0x00, 0x01, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00, 'a', 'b'});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(no_nul, "pkg/T");
-              reader.String("frame_id");
-            }),
-            "CDR pkg/T: field 'frame_id' at offset 8: string does not end in NUL");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(no_nul, "pkg/T");
+        reader.String("frame_id");
+      },
+      CdrError, "CDR pkg/T: field 'frame_id' at offset 8: string does not end in NUL");
 
   const std::vector<std::byte> zero_length =
       AsBytes({0x00, 0x01, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(zero_length, "pkg/T");
-              reader.String("s");
-            }),
-            "CDR pkg/T: field 's' at offset 8: string length 0 (must count the terminating NUL)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(zero_length, "pkg/T");
+        reader.String("s");
+      },
+      CdrError,
+      "CDR pkg/T: field 's' at offset 8: string length 0 (must count the terminating NUL)");
 
   const std::vector<std::byte> long_string =
       AsBytes({0x00, 0x01, 0x00, 0x00, 0x10, 0x00, 0x00, 0x00, 'a', 0});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(long_string, "pkg/T");
-              reader.String("s");
-            }),
-            "CDR pkg/T: field 's' at offset 8: 16 bytes needed, only 2 left");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(long_string, "pkg/T");
+        reader.String("s");
+      },
+      CdrError, "CDR pkg/T: field 's' at offset 8: 16 bytes needed, only 2 left");
 
   const std::vector<std::byte> bad_bool = AsBytes({0x00, 0x01, 0x00, 0x00, 0x02});
-  EXPECT_EQ(ErrorOf([&] {
-              CdrReader reader(bad_bool, "pkg/T");
-              reader.Bool("flag");
-            }),
-            "CDR pkg/T: field 'flag' at offset 5: bool byte 2 is neither 0 nor 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        CdrReader reader(bad_bool, "pkg/T");
+        reader.Bool("flag");
+      },
+      CdrError, "CDR pkg/T: field 'flag' at offset 5: bool byte 2 is neither 0 nor 1");
 }
 
 }  // namespace

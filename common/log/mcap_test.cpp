@@ -2,7 +2,6 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include <functional>
 #include <map>
 #include <random>
 #include <string>
@@ -14,6 +13,7 @@
 #include "mcap_format.h"
 #include "probeless/log/mcap_reader.h"
 #include "probeless/log/mcap_writer.h"
+#include "probeless/testing/expect.h"
 #include "records.h"
 
 namespace probeless::log {
@@ -357,74 +357,37 @@ TEST(McapTest, WriterErrorsNameThePathAndTheProblem) {
   const std::string path = dir.File("errors.mcap");
   McapWriter writer(path);
   const std::string payload = "x";
-  try {
-    writer.Write(3, 0, 0, 0, Bytes(payload));
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()), path + ": Write to unknown channel id 3");
-  }
-  try {
-    writer.AddChannel("/a", "cdr", 9);
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()), path + ": AddChannel '/a': unknown schema id 9");
-  }
-  try {
-    writer.AddChannel("", "cdr", 0);
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()), path + ": AddChannel: empty topic");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(writer.Write(3, 0, 0, 0, Bytes(payload)), LogError,
+                                  path + ": Write to unknown channel id 3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(writer.AddChannel("/a", "cdr", 9), LogError,
+                                  path + ": AddChannel '/a': unknown schema id 9");
+  PROBELESS_EXPECT_THROWS_MESSAGE(writer.AddChannel("", "cdr", 0), LogError,
+                                  path + ": AddChannel: empty topic");
   writer.Close();
   writer.Close();  // idempotent
-  try {
-    writer.AddSchema("s", "e", "d");
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()), path + ": AddSchema after Close()");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(writer.AddSchema("s", "e", "d"), LogError,
+                                  path + ": AddSchema after Close()");
 
   WriterOptions zero_chunk;
   zero_chunk.chunk_size = 0;
-  try {
-    McapWriter bad(dir.File("zero.mcap"), zero_chunk);
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()),
-              dir.File("zero.mcap") + ": WriterOptions::chunk_size must be > 0");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      McapWriter bad(dir.File("zero.mcap"), zero_chunk), LogError,
+      dir.File("zero.mcap") + ": WriterOptions::chunk_size must be > 0");
   WriterOptions bad_level;
   bad_level.compression = Compression::kLz4;
   bad_level.compression_level = 99;
-  try {
-    McapWriter bad(dir.File("level.mcap"), bad_level);
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()),
-              dir.File("level.mcap") + ": lz4 compression level 99 out of range 0..12");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      McapWriter bad(dir.File("level.mcap"), bad_level), LogError,
+      dir.File("level.mcap") + ": lz4 compression level 99 out of range 0..12");
   const std::string missing = dir.File("no/such/dir/x.mcap");
-  try {
-    McapWriter bad(missing);
-    FAIL() << "no error";
-  } catch (const LogError& error) {
-    EXPECT_EQ(std::string(error.what()), missing + ": cannot create: No such file or directory");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(McapWriter bad(missing), LogError,
+                                  missing + ": cannot create: No such file or directory");
 }
 
 // ---- Reader errors on corrupt input ----
 
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const LogError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
-
 std::string ReadError(const std::string& path, const ReaderOptions& options = {}) {
-  return ErrorOf([&] {
+  return probeless::testing::ThrownMessage<LogError>([&] {
     McapReader reader(path, options);
     ReadAll(reader);
   });

@@ -7,7 +7,6 @@
 
 #include <cmath>
 #include <cstring>
-#include <functional>
 #include <random>
 #include <set>
 #include <sstream>
@@ -16,21 +15,13 @@
 
 #include "probeless/log/cdr.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::log {
 namespace {
 
 namespace m = probeless::msgs;
 using ::testing::HasSubstr;
-
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const CdrError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
 
 std::mt19937 rng(42);
 float RandomFloat() { return std::uniform_real_distribution<float>(-1.0f, 1.0f)(rng); }
@@ -67,17 +58,17 @@ TEST(Ros2ConvertersTest, EveryTypeHasOneConverter) {
     EXPECT_EQ(FindRos2ConverterByRos2Type(converter->ros2_type()), converter);
   }
   EXPECT_EQ(probeless_types.size(), 8u);
-  EXPECT_EQ(ros2_types, (std::set<std::string_view>{
-                            "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo",
-                            "geometry_msgs/msg/PoseStamped", "probeless_msgs/msg/FaceObservation",
-                            "probeless_msgs/msg/ShLight", "probeless_msgs/msg/GeometryBuffer",
-                            "probeless_msgs/msg/TransferBuffer",
-                            "probeless_msgs/msg/TrackingStatus"}));
+  EXPECT_EQ(ros2_types,
+            (std::set<std::string_view>{
+                "sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo",
+                "geometry_msgs/msg/PoseStamped", "probeless_msgs/msg/FaceObservation",
+                "probeless_msgs/msg/ShLight", "probeless_msgs/msg/GeometryBuffer",
+                "probeless_msgs/msg/TransferBuffer", "probeless_msgs/msg/TrackingStatus"}));
   EXPECT_EQ(Ros2ConverterFor<m::Image>().ros2_type(), "sensor_msgs/msg/Image");
   EXPECT_EQ(Ros2ConverterFor<m::Pose>().layout_hash(), m::Pose::kLayoutHash);
   EXPECT_EQ(FindRos2ConverterByRos2Type("std_msgs/msg/String"), nullptr);
-  EXPECT_EQ(ErrorOf([] { Ros2ConverterForType("probeless_msgs/Header"); }),
-            "no ROS 2 conversion for probeless type 'probeless_msgs/Header'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(Ros2ConverterForType("probeless_msgs/Header"), CdrError,
+                                  "no ROS 2 conversion for probeless type 'probeless_msgs/Header'");
 }
 
 // Splits a concatenated ros2msg schema into (type name, definition) sections.
@@ -199,7 +190,8 @@ TEST(CompressedImageTest, LayoutAndSchema) {
   // The same dependency texts as the Image schema.
   const std::string image_schema(Ros2ConverterFor<m::Image>().schema_text());
   const std::string& schema = CompressedImageSchemaText();
-  EXPECT_THAT(schema, ::testing::StartsWith("std_msgs/Header header\nstring format\nuint8[] data\n"));
+  EXPECT_THAT(schema,
+              ::testing::StartsWith("std_msgs/Header header\nstring format\nuint8[] data\n"));
   EXPECT_EQ(schema.substr(schema.find("====")), image_schema.substr(image_schema.find("====")));
 }
 
@@ -221,26 +213,31 @@ TEST(ImageConversionTest, DecodeErrors) {
   };
   EXPECT_EQ(DecodeRos2(converter, image_cdr("mono16", 0, 6, 12)).size(), sizeof(m::Image) + 12);
   EXPECT_EQ(DecodeRos2(converter, image_cdr("rgb8", 1, 9, 18)).size(), sizeof(m::Image) + 18);
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, image_cdr("yuv422", 0, 6, 12)); }),
-            "CDR sensor_msgs/msg/Image: field 'encoding' at offset 39: unsupported image "
-            "encoding 'yuv422' (expected rgb8, bgr8, mono8, mono16, 16UC1, 32FC1 or 32FC3)");
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, image_cdr("mono16", 1, 6, 12)); }),
-            "CDR sensor_msgs/msg/Image: field 'is_bigendian' at offset 40: big-endian mono16 "
-            "pixels are not supported");
-  EXPECT_THAT(ErrorOf([&] { DecodeRos2(converter, image_cdr("mono16", 0, 6, 11)); }),
-              HasSubstr("field 'data' at offset 59: 11 bytes, but step * height = 12"));
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, image_cdr("mono16", 0, 4, 8)); }),
-            "CDR sensor_msgs/msg/Image: decoded message invalid: Image 3x2 mono16 (step 4): step "
-            "4 is smaller than width * 2 bytes per pixel");
-  EXPECT_EQ(
-      ErrorOf([&] { DecodeRos2(converter, image_cdr("mono8", 0, 3, 6, std::string(40, 'f'))); }),
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, image_cdr("yuv422", 0, 6, 12)), CdrError,
+      "CDR sensor_msgs/msg/Image: field 'encoding' at offset 39: unsupported image "
+      "encoding 'yuv422' (expected rgb8, bgr8, mono8, mono16, 16UC1, 32FC1 or 32FC3)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, image_cdr("mono16", 1, 6, 12)), CdrError,
+      "CDR sensor_msgs/msg/Image: field 'is_bigendian' at offset 40: big-endian mono16 "
+      "pixels are not supported");
+  PROBELESS_EXPECT_THROWS_MESSAGE_THAT(
+      DecodeRos2(converter, image_cdr("mono16", 0, 6, 11)), CdrError,
+      HasSubstr("field 'data' at offset 59: 11 bytes, but step * height = 12"));
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, image_cdr("mono16", 0, 4, 8)), CdrError,
+      "CDR sensor_msgs/msg/Image: decoded message invalid: Image 3x2 mono16 (step 4): step "
+      "4 is smaller than width * 2 bytes per pixel");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, image_cdr("mono8", 0, 3, 6, std::string(40, 'f'))), CdrError,
       "CDR sensor_msgs/msg/Image: field 'header.frame_id' at offset 57: '" + std::string(40, 'f') +
           "' does not fit a probeless frame id (at most 31 characters, no NUL)");
   const std::vector<std::byte> cdr = image_cdr("mono8", 0, 3, 6);
   MessageBuffer small(sizeof(m::Image));
-  EXPECT_EQ(ErrorOf([&] { converter.Decode(cdr, {}, small.bytes()); }),
-            "CDR sensor_msgs/msg/Image: output of 128 bytes is smaller than the 134 bytes of the "
-            "decoded probeless_msgs/Image");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      converter.Decode(cdr, {}, small.bytes()), CdrError,
+      "CDR sensor_msgs/msg/Image: output of 128 bytes is smaller than the 134 bytes of the "
+      "decoded probeless_msgs/Image");
 }
 
 TEST(ImageConversionTest, EncodeRejectsInvalidImages) {
@@ -248,11 +245,13 @@ TEST(ImageConversionTest, EncodeRejectsInvalidImages) {
   MessageBuffer buffer(sizeof(m::Image) + 10);
   auto image = m::WriteMessage<m::Image>(buffer.bytes());
   image->Init(4, 4, m::Encoding::kMono8);
-  EXPECT_EQ(ErrorOf([&] { EncodeRos2(converter, buffer.bytes()); }),
-            "CDR sensor_msgs/msg/Image: Image 4x4 mono8 (step 4) needs 16 payload bytes, got 10");
-  EXPECT_EQ(ErrorOf([&] { EncodeRos2(converter, buffer.bytes().first(100)); }),
-            "CDR sensor_msgs/msg/Image: probeless_msgs/Image: message of 100 bytes is smaller than "
-            "its fixed part (128 bytes)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      EncodeRos2(converter, buffer.bytes()), CdrError,
+      "CDR sensor_msgs/msg/Image: Image 4x4 mono8 (step 4) needs 16 payload bytes, got 10");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      EncodeRos2(converter, buffer.bytes().first(100)), CdrError,
+      "CDR sensor_msgs/msg/Image: probeless_msgs/Image: message of 100 bytes is smaller than "
+      "its fixed part (128 bytes)");
 }
 
 TEST(HeaderConversionTest, StampsBeforeTheEpochAndOutOfRange) {
@@ -268,16 +267,18 @@ TEST(HeaderConversionTest, StampsBeforeTheEpochAndOutOfRange) {
   EXPECT_EQ(m::ReadMessage<m::Pose>(DecodeRos2(converter, cdr).bytes())->header.stamp_ns, -1);
 
   pose->header.stamp_ns = int64_t{1} << 62;
-  EXPECT_EQ(ErrorOf([&] { EncodeRos2(converter, buffer.bytes()); }),
-            "CDR geometry_msgs/msg/PoseStamped: stamp 4611686018427387904 ns is outside the int32 "
-            "seconds range of builtin_interfaces/Time");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      EncodeRos2(converter, buffer.bytes()), CdrError,
+      "CDR geometry_msgs/msg/PoseStamped: stamp 4611686018427387904 ns is outside the int32 "
+      "seconds range of builtin_interfaces/Time");
 
   CdrWriter bad;
   bad.Write<int32_t>(0);
   bad.Write<uint32_t>(1'000'000'000);
-  EXPECT_EQ(ErrorOf([&] { converter.DecodedSize(bad.data()); }),
-            "CDR geometry_msgs/msg/PoseStamped: field 'header.stamp.nanosec' at offset 12: "
-            "1000000000 is not below 1e9");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      converter.DecodedSize(bad.data()), CdrError,
+      "CDR geometry_msgs/msg/PoseStamped: field 'header.stamp.nanosec' at offset 12: "
+      "1000000000 is not below 1e9");
 }
 
 // ---- sensor_msgs/msg/CameraInfo ----
@@ -359,14 +360,14 @@ TEST(CameraInfoConversionTest, DistortionCountMustMatchTheModel) {
     w.Bool(false);
     return w.Take();
   };
-  EXPECT_EQ(ErrorOf([&] {
-              DecodeRos2(converter, info_cdr("plumb_bob", {0.1, 0.2}));
-            }),
-            "CDR sensor_msgs/msg/CameraInfo: field 'd' at offset 68: distortion model "
-            "'plumb_bob' has 5 coefficients, d has 2");
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, info_cdr("fisheye", {})); }),
-            "CDR sensor_msgs/msg/CameraInfo: field 'distortion_model' at offset 40: unsupported "
-            "distortion model 'fisheye' (expected '', plumb_bob or rational_polynomial)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, info_cdr("plumb_bob", {0.1, 0.2})), CdrError,
+      "CDR sensor_msgs/msg/CameraInfo: field 'd' at offset 68: distortion model "
+      "'plumb_bob' has 5 coefficients, d has 2");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, info_cdr("fisheye", {})), CdrError,
+      "CDR sensor_msgs/msg/CameraInfo: field 'distortion_model' at offset 40: unsupported "
+      "distortion model 'fisheye' (expected '', plumb_bob or rational_polynomial)");
   // Uncalibrated drivers send plumb_bob with an empty d: accepted as zeros.
   const MessageBuffer zeros = DecodeRos2(converter, info_cdr("plumb_bob", {}));
   EXPECT_EQ(m::ReadMessage<m::CameraInfo>(zeros.bytes())->distortion_count, 5u);
@@ -518,9 +519,10 @@ TEST(ProbelessTypesConversionTest, ShLightRecordedBeforeTheUnitsFieldDecodesAsUn
   // A value outside the enum is refused by name.
   std::vector<std::byte> bad = cdr;
   bad[bad.size() - 4] = std::byte{9};
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(converter, bad); }),
-            "CDR probeless_msgs/msg/ShLight: decoded message invalid: probeless_msgs/ShLight: "
-            "units 9 is not unknown (0), linear (1), face_model (2) or linear_unscaled (3)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(converter, bad), CdrError,
+      "CDR probeless_msgs/msg/ShLight: decoded message invalid: probeless_msgs/ShLight: "
+      "units 9 is not unknown (0), linear (1), face_model (2) or linear_unscaled (3)");
 }
 
 TEST(ProbelessTypesConversionTest, FaceObservationLayout) {
@@ -559,9 +561,10 @@ TEST(ProbelessTypesConversionTest, InconsistentSizesAreRejected) {
   w.Write<uint32_t>(2);  // height
   w.Write<uint32_t>(9);  // coefficient_count
   w.Sequence(std::span<const float>(std::vector<float>(35)));
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(Ros2ConverterFor<m::TransferBuffer>(), w.data()); }),
-            "CDR probeless_msgs/msg/TransferBuffer: field 'coefficients' at offset 192: 35 "
-            "values, width * height * coefficient_count = 36");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(Ros2ConverterFor<m::TransferBuffer>(), w.data()), CdrError,
+      "CDR probeless_msgs/msg/TransferBuffer: field 'coefficients' at offset 192: 35 "
+      "values, width * height * coefficient_count = 36");
 
   CdrWriter light;
   light.Write<int32_t>(0);
@@ -570,8 +573,9 @@ TEST(ProbelessTypesConversionTest, InconsistentSizesAreRejected) {
   light.Write<int64_t>(0);
   light.Write<uint64_t>(0);
   light.Write<uint32_t>(7);  // bands
-  EXPECT_EQ(ErrorOf([&] { DecodeRos2(Ros2ConverterFor<m::ShLight>(), light.data()); }),
-            "CDR probeless_msgs/msg/ShLight: field 'bands' at offset 40: 7 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      DecodeRos2(Ros2ConverterFor<m::ShLight>(), light.data()), CdrError,
+      "CDR probeless_msgs/msg/ShLight: field 'bands' at offset 40: 7 out of range 1..5");
 
   CdrWriter geometry;
   geometry.Write<int32_t>(0);
@@ -581,13 +585,15 @@ TEST(ProbelessTypesConversionTest, InconsistentSizesAreRejected) {
   geometry.Write<uint64_t>(0);
   geometry.Write<uint32_t>(0xFFFFFFFF);
   geometry.Write<uint32_t>(0xFFFFFFFF);
-  EXPECT_THAT(ErrorOf([&] { DecodeRos2(Ros2ConverterFor<m::GeometryBuffer>(), geometry.data()); }),
-              HasSubstr("field 'height' at offset 44: 18446744065119617025 pixels are too many"));
+  PROBELESS_EXPECT_THROWS_MESSAGE_THAT(
+      DecodeRos2(Ros2ConverterFor<m::GeometryBuffer>(), geometry.data()), CdrError,
+      HasSubstr("field 'height' at offset 44: 18446744065119617025 pixels are too many"));
 
   MessageBuffer bad_light = MakeLight();
   reinterpret_cast<m::ShLight*>(bad_light.bytes().data())->bands = 0;
-  EXPECT_EQ(ErrorOf([&] { EncodeRos2(Ros2ConverterFor<m::ShLight>(), bad_light.bytes()); }),
-            "CDR probeless_msgs/msg/ShLight: probeless_msgs/ShLight: bands 0 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      EncodeRos2(Ros2ConverterFor<m::ShLight>(), bad_light.bytes()), CdrError,
+      "CDR probeless_msgs/msg/ShLight: probeless_msgs/ShLight: bands 0 out of range 1..5");
 }
 
 TEST(Ros2ConvertersTest, EveryTruncatedMessageIsACleanError) {
@@ -603,7 +609,8 @@ TEST(Ros2ConvertersTest, EveryTruncatedMessageIsACleanError) {
     for (size_t cut = 0; cut < cdr.size(); ++cut) {
       // A light that ends after `confidence` is one recorded before the units field (below).
       if (type == m::ShLight::kTypeName && cut == cdr.size() - 4) continue;
-      const std::string error = ErrorOf([&] { DecodeRos2(converter, std::span(cdr.data(), cut)); });
+      const std::string error = probeless::testing::ThrownMessage<CdrError>(
+          [&] { DecodeRos2(converter, std::span(cdr.data(), cut)); });
       ASSERT_EQ(error.rfind("CDR " + std::string(converter.ros2_type()) + ": ", 0), 0u)
           << type << " cut at " << cut << ": " << error;
     }

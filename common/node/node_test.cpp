@@ -1,6 +1,5 @@
 // Unit tests of the node runtime: arguments, parameters, params files, topic names, logging and
 // shutdown (no bus traffic; see node_bus_test.cpp for that).
-#include "probeless/node/main.h"
 #include "probeless/node/node.h"
 
 #include <fcntl.h>
@@ -15,6 +14,9 @@
 #include <sstream>
 #include <thread>
 
+#include "probeless/node/main.h"
+#include "probeless/testing/expect.h"
+
 namespace probeless::node {
 namespace {
 
@@ -28,18 +30,9 @@ std::vector<std::string> Argv(std::vector<std::string> args) {
   return args;
 }
 
-template <class F>
-std::string ErrorOf(F&& f) {
-  try {
-    f();
-  } catch (const NodeError& e) {
-    return e.what();
-  }
-  return "no error";
-}
-
 std::string NodeErrorOf(std::vector<std::string> args, std::string_view name = "talker") {
-  return ErrorOf([&] { Node node(Argv(std::move(args)), name); });
+  return probeless::testing::ThrownMessage<NodeError>(
+      [&] { Node node(Argv(std::move(args)), name); });
 }
 
 // A directory for params files, removed at the end of the test.
@@ -265,28 +258,35 @@ TEST(ParamsTest, WrongTypesNameNodeParamExpectedAndActual) {
   Node node(Argv({"--ros-args", "-r", "__ns:=/cam", "-p", "rate:=fast", "-p", "n:=1.5", "-p",
                   "huge:=5000000000", "-p", "list:=[1, 2]", "-p", "flag:=1"}),
             "talker");
-  EXPECT_EQ(ErrorOf([&] { node.Param("rate", 10.0); }),
-            "node '/cam/talker': parameter 'rate' has type string (value \"fast\", from -p), "
-            "expected double");
-  EXPECT_EQ(ErrorOf([&] { node.Param<int64_t>("n", 1); }),
-            "node '/cam/talker': parameter 'n' has type double (value 1.5, from -p), expected "
-            "integer");
-  EXPECT_EQ(ErrorOf([&] { node.Param<int>("huge", 1); }),
-            "node '/cam/talker': parameter 'huge' value 5000000000 (from -p) is out of range for "
-            "int32");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("rate", 10.0), NodeError,
+      "node '/cam/talker': parameter 'rate' has type string (value \"fast\", from -p), "
+      "expected double");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param<int64_t>("n", 1), NodeError,
+      "node '/cam/talker': parameter 'n' has type double (value 1.5, from -p), expected "
+      "integer");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param<int>("huge", 1), NodeError,
+      "node '/cam/talker': parameter 'huge' value 5000000000 (from -p) is out of range for "
+      "int32");
   EXPECT_EQ(node.Param<int64_t>("huge", 1), 5'000'000'000);
-  EXPECT_EQ(ErrorOf([&] { node.Param("list", std::vector<std::string>{}); }),
-            "node '/cam/talker': parameter 'list' has type integer_array (value [1, 2], from -p), "
-            "expected string_array");
-  EXPECT_EQ(ErrorOf([&] { node.Param("flag", false); }),
-            "node '/cam/talker': parameter 'flag' has type integer (value 1, from -p), expected "
-            "bool");
-  EXPECT_EQ(ErrorOf([&] { node.RequireParam<std::string>("device"); }),
-            "node '/cam/talker': required parameter 'device' (string) is not set (give it with -p "
-            "or a params file)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("list", std::vector<std::string>{}), NodeError,
+      "node '/cam/talker': parameter 'list' has type integer_array (value [1, 2], from -p), "
+      "expected string_array");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("flag", false), NodeError,
+      "node '/cam/talker': parameter 'flag' has type integer (value 1, from -p), expected "
+      "bool");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.RequireParam<std::string>("device"), NodeError,
+      "node '/cam/talker': required parameter 'device' (string) is not set (give it with -p "
+      "or a params file)");
   node.Param("width", int64_t{640});
-  EXPECT_EQ(ErrorOf([&] { node.Param("width", 1.0); }),
-            "node '/cam/talker': parameter 'width' declared as integer, now requested as double");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("width", 1.0), NodeError,
+      "node '/cam/talker': parameter 'width' declared as integer, now requested as double");
 }
 
 TEST(ParamsTest, RequireParamAndIntrospection) {
@@ -486,18 +486,20 @@ TEST(TopicNamesTest, InvalidNamesThrowExactMessages) {
       " (expected segments of letters, digits and '_' not starting with a digit, separated by "
       "single '/', optionally starting with '/' or '~/')";
   for (const std::string name : {"a//b", "a/", "/", "a b", "a.b", "~x", "1abc", "/a/2b", "a-b"}) {
-    EXPECT_EQ(ErrorOf([&] { node.ResolveTopicName(name); }),
-              "node '/talker': invalid topic name '" + name + "'" + rules);
+    PROBELESS_EXPECT_THROWS_MESSAGE(node.ResolveTopicName(name), NodeError,
+                                    "node '/talker': invalid topic name '" + name + "'" + rules);
   }
-  EXPECT_EQ(ErrorOf([&] { node.ResolveTopicName(""); }),
-            "node '/talker': invalid topic name '': empty");
-  EXPECT_EQ(ErrorOf([&] { node.ResolveTopicName("{robot}/x"); }),
-            "node '/talker': invalid topic name '{robot}/x': unknown substitution '{robot}' "
-            "(expected {node}, {ns} or {namespace})");
+  PROBELESS_EXPECT_THROWS_MESSAGE(node.ResolveTopicName(""), NodeError,
+                                  "node '/talker': invalid topic name '': empty");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.ResolveTopicName("{robot}/x"), NodeError,
+      "node '/talker': invalid topic name '{robot}/x': unknown substitution '{robot}' "
+      "(expected {node}, {ns} or {namespace})");
   // Length is checked by the bus's own validation.
-  const std::string message = ErrorOf([&] { node.ResolveTopicName(std::string(120, 'x')); });
-  EXPECT_TRUE(message.starts_with("node '/talker': invalid topic name '/xxx")) << message;
-  EXPECT_NE(message.find("longer than 100"), std::string::npos) << message;
+  PROBELESS_EXPECT_THROWS_MESSAGE_THAT(
+      node.ResolveTopicName(std::string(120, 'x')), NodeError,
+      ::testing::AllOf(::testing::StartsWith("node '/talker': invalid topic name '/xxx"),
+                       ::testing::HasSubstr("longer than 100")));
 }
 
 // --- Logging -----------------------------------------------------------------------------------
@@ -616,9 +618,10 @@ TEST(ShutdownTest, WaitForShutdownWakesPromptlyOnSignal) {
 }
 
 TEST(ShutdownTest, RateSleepsAndStopsOnRequest) {
-  EXPECT_EQ(ErrorOf([] { Rate rate(0); }), "invalid rate 0 Hz (expected a finite value > 0)");
-  EXPECT_EQ(ErrorOf([] { Rate rate(std::nan("")); }),
-            "invalid rate nan Hz (expected a finite value > 0)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(Rate rate(0), NodeError,
+                                  "invalid rate 0 Hz (expected a finite value > 0)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(Rate rate(std::nan("")), NodeError,
+                                  "invalid rate nan Hz (expected a finite value > 0)");
   const int status = RunInChild([] {
     Rate rate(100);
     if (rate.period() != 10ms) _exit(30);
@@ -645,28 +648,24 @@ TEST(RunMainTest, MapsExceptionsToExitCodesAndOneLine) {
     using std::runtime_error::runtime_error;
   };
   EXPECT_EQ(RunMain("t", [] { return 7; }), 7);
-  testing::internal::CaptureStderr();
+  ::testing::internal::CaptureStderr();
   EXPECT_EQ(RunMain("t", []() -> int { throw UsageError("--rate needs a value"); }), 2);
-  EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] --rate needs a value\n");
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "[error] [t] --rate needs a value\n");
   EXPECT_EQ(RunMain("t", []() -> int { throw NodeError("bad param"); }), 2);
   EXPECT_EQ(RunMain("t", []() -> int { throw FormatError("x.mcap: bad magic"); }), 2);
   EXPECT_EQ(RunMain("t", []() -> int { throw std::invalid_argument("stoi"); }), 2);
   EXPECT_EQ(RunMain("t", []() -> int { throw CorruptState("index past the end"); }), 1);
-  testing::internal::CaptureStderr();
+  ::testing::internal::CaptureStderr();
   EXPECT_EQ(RunMain("t", []() -> int { throw std::runtime_error("disk full"); }), 1);
-  EXPECT_EQ(testing::internal::GetCapturedStderr(), "[error] [t] disk full\n");
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "[error] [t] disk full\n");
 }
 
 TEST(RunMainTest, ParseNumberOption) {
   EXPECT_DOUBLE_EQ(ParseNumberOption("--rate", "2.5"), 2.5);
   EXPECT_DOUBLE_EQ(ParseNumberOption("--n", "-3"), -3);
   for (const char* bad : {"", "fast", "2x", "nan", "inf"}) {
-    try {
-      ParseNumberOption("--rate", bad);
-      ADD_FAILURE() << bad;
-    } catch (const UsageError& e) {
-      EXPECT_EQ(std::string(e.what()), std::string("--rate expects a number, got '") + bad + "'");
-    }
+    PROBELESS_EXPECT_THROWS_MESSAGE(ParseNumberOption("--rate", bad), UsageError,
+                                    std::string("--rate expects a number, got '") + bad + "'");
   }
 }
 

@@ -5,19 +5,10 @@
 #include <string>
 
 #include "probeless/parse/number.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::parse {
 namespace {
-
-template <class F>
-std::string MessageOf(F&& f) {
-  try {
-    f();
-  } catch (const NumberError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 TEST(ParseInteger, AcceptsWholeDecimalIntegers) {
   EXPECT_EQ(ParseInteger<int>("--n", "12"), 12);
@@ -38,28 +29,30 @@ TEST(ParseInteger, RejectsPartialAndMalformedText) {
 }
 
 TEST(ParseInteger, MessagesNameTheInputAndTheExpectation) {
-  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--max-frames", "12abc"); }),
-            "--max-frames expects a non-negative integer, got '12abc'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--chunk-size", "-1", 1); }),
-            "--chunk-size expects a positive integer, got '-1'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<uint64_t>("--chunk-size", "99999999999999999999", 1); }),
-            "--chunk-size expects a positive integer up to 18446744073709551615, got "
-            "'99999999999999999999'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("device", "99999999999999999999", 0); }),
-            "device expects a non-negative integer up to 2147483647, got '99999999999999999999'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--x", "-99999999999"); }),
-            "--x expects an integer down to -2147483648, got '-99999999999'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--x", "4 2"); }),
-            "--x expects an integer, got '4 2'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--level", "7", 0, 3); }),
-            "--level expects an integer in [0, 3], got '7'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<uint16_t>("--port", "70000", 1); }),
-            "--port expects a positive integer up to 65535, got '70000'");
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("--n", "0", 1); }),
-            "--n expects a positive integer, got '0'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<uint64_t>("--max-frames", "12abc"), NumberError,
+                                  "--max-frames expects a non-negative integer, got '12abc'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<uint64_t>("--chunk-size", "-1", 1), NumberError,
+                                  "--chunk-size expects a positive integer, got '-1'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ParseInteger<uint64_t>("--chunk-size", "99999999999999999999", 1), NumberError,
+      "--chunk-size expects a positive integer up to 18446744073709551615, got "
+      "'99999999999999999999'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ParseInteger<int>("device", "99999999999999999999", 0), NumberError,
+      "device expects a non-negative integer up to 2147483647, got '99999999999999999999'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<int>("--x", "-99999999999"), NumberError,
+                                  "--x expects an integer down to -2147483648, got '-99999999999'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<int>("--x", "4 2"), NumberError,
+                                  "--x expects an integer, got '4 2'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<int>("--level", "7", 0, 3), NumberError,
+                                  "--level expects an integer in [0, 3], got '7'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<uint16_t>("--port", "70000", 1), NumberError,
+                                  "--port expects a positive integer up to 65535, got '70000'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<int>("--n", "0", 1), NumberError,
+                                  "--n expects a positive integer, got '0'");
   // A newline from a file stays on the message's one line.
-  EXPECT_EQ(MessageOf([] { ParseInteger<int>("count", "3\n"); }),
-            "count expects an integer, got '3\\x0a'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseInteger<int>("count", "3\n"), NumberError,
+                                  "count expects an integer, got '3\\x0a'");
 }
 
 TEST(ParseDouble, AcceptsFixedAndScientific) {
@@ -81,45 +74,47 @@ TEST(ParseDouble, RejectsPartialNonFiniteAndOutOfRange) {
 }
 
 TEST(ParseDouble, Messages) {
-  EXPECT_EQ(MessageOf([] { ParseDouble("--fps", "30fps"); }),
-            "--fps expects a number, got '30fps'");
-  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "-1", 0); }),
-            "--gain expects a non-negative number, got '-1'");
-  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "0.1", 0.5); }),
-            "--gain expects a number >= 0.5, got '0.1'");
-  EXPECT_EQ(MessageOf([] { ParseDouble("--gain", "3", std::numeric_limits<double>::lowest(), 2); }),
-            "--gain expects a number <= 2, got '3'");
-  EXPECT_EQ(MessageOf([] { ParseDouble("albedo", "1.5", 0, 1); }),
-            "albedo expects a number in [0, 1], got '1.5'");
-  EXPECT_EQ(MessageOf([] { ParsePositiveDouble("--fps", "0"); }),
-            "--fps expects a positive number, got '0'");
-  EXPECT_EQ(MessageOf([] { ParsePositiveDouble("--fps", "nan"); }),
-            "--fps expects a positive number, got 'nan'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDouble("--fps", "30fps"), NumberError,
+                                  "--fps expects a number, got '30fps'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDouble("--gain", "-1", 0), NumberError,
+                                  "--gain expects a non-negative number, got '-1'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDouble("--gain", "0.1", 0.5), NumberError,
+                                  "--gain expects a number >= 0.5, got '0.1'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ParseDouble("--gain", "3", std::numeric_limits<double>::lowest(), 2), NumberError,
+      "--gain expects a number <= 2, got '3'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDouble("albedo", "1.5", 0, 1), NumberError,
+                                  "albedo expects a number in [0, 1], got '1.5'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParsePositiveDouble("--fps", "0"), NumberError,
+                                  "--fps expects a positive number, got '0'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParsePositiveDouble("--fps", "nan"), NumberError,
+                                  "--fps expects a positive number, got 'nan'");
 }
 
 TEST(ParseFloat, RangeOfFloat) {
   EXPECT_FLOAT_EQ(ParseFloat("--scale", "0.25"), 0.25f);
-  EXPECT_EQ(MessageOf([] { ParseFloat("--scale", "1e39"); }),
-            "--scale expects a number, got '1e39'");
-  EXPECT_EQ(MessageOf([] { ParseFloat("--scale", "2", 0, 1); }),
-            "--scale expects a number in [0, 1], got '2'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseFloat("--scale", "1e39"), NumberError,
+                                  "--scale expects a number, got '1e39'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseFloat("--scale", "2", 0, 1), NumberError,
+                                  "--scale expects a number in [0, 1], got '2'");
 }
 
 TEST(ParseList, CountAndItems) {
   EXPECT_EQ(ParseDoubleList("--origin", "1,-2.5,3", 3, 3), (std::vector<double>{1, -2.5, 3}));
   EXPECT_EQ(ParseIntegerList<int>("--icp", "10,5", 1, 3, 1), (std::vector<int>{10, 5}));
-  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,2", 3, 3); }),
-            "--origin expects 3 comma-separated numbers, got '1,2'");
-  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,2,3,", 3, 3); }),
-            "--origin expects 3 comma-separated numbers, got '1,2,3,'");
-  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("--k", "", 1, 2); }),
-            "--k item 1 expects an integer, got ''");
-  EXPECT_EQ(MessageOf([] { ParseDoubleList("--origin", "1,y,3", 3, 3); }),
-            "--origin item 2 expects a number, got 'y'");
-  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("FUSION_EVAL_ICP", "10,5,-4", 3, 3, 1); }),
-            "FUSION_EVAL_ICP item 3 expects a positive integer, got '-4'");
-  EXPECT_EQ(MessageOf([] { ParseIntegerList<int>("--k", "1,2,3", 1, 2); }),
-            "--k expects 1 to 2 comma-separated numbers, got '1,2,3'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDoubleList("--origin", "1,2", 3, 3), NumberError,
+                                  "--origin expects 3 comma-separated numbers, got '1,2'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDoubleList("--origin", "1,2,3,", 3, 3), NumberError,
+                                  "--origin expects 3 comma-separated numbers, got '1,2,3,'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseIntegerList<int>("--k", "", 1, 2), NumberError,
+                                  "--k item 1 expects an integer, got ''");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseDoubleList("--origin", "1,y,3", 3, 3), NumberError,
+                                  "--origin item 2 expects a number, got 'y'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseIntegerList<int>("FUSION_EVAL_ICP", "10,5,-4", 3, 3, 1),
+                                  NumberError,
+                                  "FUSION_EVAL_ICP item 3 expects a positive integer, got '-4'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ParseIntegerList<int>("--k", "1,2,3", 1, 2), NumberError,
+                                  "--k expects 1 to 2 comma-separated numbers, got '1,2,3'");
 }
 
 TEST(NumberError, IsInvalidArgument) {

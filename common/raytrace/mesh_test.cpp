@@ -8,6 +8,8 @@
 #include <fstream>
 #include <string>
 
+#include "probeless/testing/expect.h"
+
 namespace probeless::raytrace {
 namespace {
 
@@ -24,14 +26,6 @@ class MeshFiles : public ::testing::Test {
     const std::string path = (dir_ / name).string();
     std::ofstream(path, std::ios::binary) << text;
     return path;
-  }
-  static std::string ErrorOf(const std::function<void()>& fn) {
-    try {
-      fn();
-    } catch (const RaytraceError& e) {
-      return e.what();
-    }
-    return "no error";
   }
   fs::path dir_;
 };
@@ -59,30 +53,34 @@ TEST_F(MeshFiles, ObjQuadWithUvsAndNormals) {
 
 TEST_F(MeshFiles, ObjErrorsNameFileAndLine) {
   const std::string bad_number = Write("a.obj", "v 0 0 0\nv 1 x 0\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(bad_number); }), bad_number + ":2: expected a number, got 'x'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj(bad_number), RaytraceError,
+                                  bad_number + ":2: expected a number, got 'x'");
   const std::string bad_index = Write("b.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(bad_index); }),
-            bad_index + ":4: vertex index 4 out of range (3 defined so far)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj(bad_index), RaytraceError,
+                                  bad_index + ":4: vertex index 4 out of range (3 defined so far)");
   // A relative index one before the first vertex (mesh_fuzz: it was taken as "no index" and
   // read v[-1]).
   const std::string before_first = Write("r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 -2 -1\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(before_first); }),
-            before_first + ":4: vertex index -4 out of range (3 defined so far)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadObj(before_first), RaytraceError,
+      before_first + ":4: vertex index -4 out of range (3 defined so far)");
   const std::string uv_before_first =
       Write("s.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/-2 2/1 3/1\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(uv_before_first); }),
-            uv_before_first + ":5: texture coordinate index -2 out of range (1 defined so far)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadObj(uv_before_first), RaytraceError,
+      uv_before_first + ":5: texture coordinate index -2 out of range (1 defined so far)");
   const std::string short_face = Write("c.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(short_face); }),
-            short_face + ":3: face 'f' expects at least 3 vertices, got 2");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj(short_face), RaytraceError,
+                                  short_face + ":3: face 'f' expects at least 3 vertices, got 2");
   const std::string unknown = Write("d.obj", "v 0 0 0\nbogus 1\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(unknown); }), unknown + ":2: unknown OBJ statement 'bogus'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj(unknown), RaytraceError,
+                                  unknown + ":2: unknown OBJ statement 'bogus'");
   const std::string empty = Write("e.obj", "v 0 0 0\n");
-  EXPECT_EQ(ErrorOf([&] { LoadObj(empty); }), empty + ": OBJ file has no faces");
-  EXPECT_EQ(ErrorOf([&] { LoadObj((dir_ / "missing.obj").string()); }),
-            (dir_ / "missing.obj").string() + ": cannot open OBJ file");
-  EXPECT_EQ(ErrorOf([&] { LoadMesh("x.stl"); }),
-            "x.stl: unknown mesh format (expected a .obj or .ply file)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj(empty), RaytraceError, empty + ": OBJ file has no faces");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadObj((dir_ / "missing.obj").string()), RaytraceError,
+                                  (dir_ / "missing.obj").string() + ": cannot open OBJ file");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadMesh("x.stl"), RaytraceError,
+                                  "x.stl: unknown mesh format (expected a .obj or .ply file)");
 }
 
 TEST_F(MeshFiles, PlyAsciiAndBinary) {
@@ -118,17 +116,19 @@ TEST_F(MeshFiles, PlyAsciiAndBinary) {
 
 TEST_F(MeshFiles, PlyErrors) {
   const std::string not_ply = Write("a.ply", "hello\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(not_ply); }),
-            not_ply + ":1: not a PLY file (expected 'ply' on the first line)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadPly(not_ply), RaytraceError,
+      not_ply + ":1: not a PLY file (expected 'ply' on the first line)");
   const std::string bad_format = Write("b.ply", "ply\nformat weird 1.0\nend_header\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(bad_format); }), bad_format + ":2: unknown PLY format 'weird'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadPly(bad_format), RaytraceError,
+                                  bad_format + ":2: unknown PLY format 'weird'");
   const std::string bad_index = Write("c.ply",
                                       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                       "property float y\nproperty float z\nelement face 1\n"
                                       "property list uchar int vertex_indices\nend_header\n"
                                       "0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(bad_index); }),
-            bad_index + ": element face: face 0 uses vertex 5 of 3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadPly(bad_index), RaytraceError,
+                                  bad_index + ": element face: face 0 uses vertex 5 of 3");
   // Face indices must be integers (a float or a NaN was cast), counts must fit the file.
   const std::string float_index =
       Write("f.ply",
@@ -136,48 +136,53 @@ TEST_F(MeshFiles, PlyErrors) {
             "property float y\nproperty float z\nelement face 1\n"
             "property list uchar float vertex_indices\nend_header\n"
             "0 0 0\n1 0 0\n0 1 0\n3 0 1 1.5\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(float_index); }),
-            float_index +
-                ": element face: face 0 vertex index must be a non-negative integer, got "
-                "1.5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadPly(float_index), RaytraceError,
+      float_index +
+          ": element face: face 0 vertex index must be a non-negative integer, got "
+          "1.5");
   const std::string negative_count =
       Write("g.ply",
             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
             "property float y\nproperty float z\nelement face 1\n"
             "property list int int vertex_indices\nend_header\n"
             "0 0 0\n1 0 0\n0 1 0\n-3 0 1 2\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(negative_count); }),
-            negative_count +
-                ": element face: face 0 vertex count must be a non-negative integer, "
-                "got -3");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadPly(negative_count), RaytraceError,
+      negative_count +
+          ": element face: face 0 vertex count must be a non-negative integer, "
+          "got -3");
   const std::string huge =
       Write("h.ply",
             "ply\nformat binary_little_endian 1.0\nelement vertex 1099511627776\n"
             "property float x\nproperty float y\nproperty float z\nend_header\n"
             "0123456789ab");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(huge); }),
-            huge +
-                ": element vertex has 1099511627776 entries of at least 12 bytes, but the file "
-                "has 12 bytes after the header (truncated or a wrong count)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadPly(huge), RaytraceError,
+      huge +
+          ": element vertex has 1099511627776 entries of at least 12 bytes, but the file "
+          "has 12 bytes after the header (truncated or a wrong count)");
   const std::string empty_element = Write("i.ply",
                                           "ply\nformat binary_little_endian 1.0\nelement junk "
                                           "4611686018427387904\nend_header\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(empty_element); }),
-            empty_element + ": element junk has 4611686018427387904 entries but no properties");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      LoadPly(empty_element), RaytraceError,
+      empty_element + ": element junk has 4611686018427387904 entries but no properties");
   const std::string nan_vertex = Write("j.ply",
                                        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
                                        "property float y\nproperty float z\nend_header\nnan 0 0\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(nan_vertex); }),
-            nan_vertex + ": element vertex: expected a number, got 'nan'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadPly(nan_vertex), RaytraceError,
+                                  nan_vertex + ": element vertex: expected a number, got 'nan'");
   const std::string truncated = Write("d.ply",
                                       "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n"
                                       "property float y\nproperty float z\nend_header\n0 0 0\n1 0");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(truncated); }),
-            truncated + ": element vertex: unexpected end of file");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadPly(truncated), RaytraceError,
+                                  truncated + ": element vertex: unexpected end of file");
   const std::string no_z = Write("e.ply",
                                  "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
                                  "property float y\nend_header\n0 0\n");
-  EXPECT_EQ(ErrorOf([&] { LoadPly(no_z); }), no_z + ": element vertex has no property 'z'");
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadPly(no_z), RaytraceError,
+                                  no_z + ": element vertex has no property 'z'");
 }
 
 TEST(Primitives, ClosedAndOutwardFacing) {

@@ -11,6 +11,7 @@
 
 #include "probeless/raytrace/render.h"
 #include "probeless/raytrace/scene.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::raytrace {
 namespace {
@@ -47,15 +48,6 @@ MeanError Stats(const std::vector<double>& values) {
   var /= static_cast<double>(values.size() - 1);
   s.error = std::sqrt(var / static_cast<double>(values.size()));
   return s;
-}
-
-std::string ErrorOf(const std::function<void()>& fn) {
-  try {
-    fn();
-  } catch (const RaytraceError& e) {
-    return e.what();
-  }
-  return "(no error)";
 }
 
 // A closed box of albedo a whose walls emit L_e, seen from inside: L = L_e / (1 - a), with Russian
@@ -398,57 +390,53 @@ TEST(PathTrace, ExposureScalesAndProgressReports) {
 
 TEST(PathTrace, InvalidInputsThrowPreciseErrors) {
   Scene scene;
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, TestCamera(8, 8), PathTraceOptions{}); }),
-            "PathTrace: scene not committed");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PathTrace(scene, TestCamera(8, 8), PathTraceOptions{}),
+                                  RaytraceError, "PathTrace: scene not committed");
   scene.Commit();
   const Camera camera = TestCamera(8, 8);
   PathTraceOptions options;
   options.samples_per_pixel = 0;
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, options); }),
-            "PathTraceOptions: samples_per_pixel must be >= 1, got 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PathTrace(scene, camera, options), RaytraceError,
+                                  "PathTraceOptions: samples_per_pixel must be >= 1, got 0");
   options = {};
   options.max_bounces = -1;
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, options); }),
-            "PathTraceOptions: max_bounces must be >= 0, got -1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PathTrace(scene, camera, options), RaytraceError,
+                                  "PathTraceOptions: max_bounces must be >= 0, got -1");
   options = {};
   options.rows_per_task = 0;
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, options); }),
-            "PathTraceOptions: rows_per_task must be >= 1, got 0");
-  EXPECT_EQ(ErrorOf([&] { IncidentRadianceSh(scene, {}, 0, PathTraceOptions{}); }),
-            "IncidentRadianceSh: directions must be >= 1, got 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PathTrace(scene, camera, options), RaytraceError,
+                                  "PathTraceOptions: rows_per_task must be >= 1, got 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(IncidentRadianceSh(scene, {}, 0, PathTraceOptions{}),
+                                  RaytraceError,
+                                  "IncidentRadianceSh: directions must be >= 1, got 0");
   Material m;
   m.roughness = 0;
-  EXPECT_EQ(ErrorOf([&] {
-              scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
-            }),
-            "Scene::AddObject: Material::roughness must be in (0, 1], got 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1), RaytraceError,
+                                  "Scene::AddObject: Material::roughness must be in (0, 1], got 0");
   m.roughness = 1.5f;
-  EXPECT_EQ(ErrorOf([&] {
-              scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
-            }),
-            "Scene::AddObject: Material::roughness must be in (0, 1], got 1.5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1), RaytraceError,
+      "Scene::AddObject: Material::roughness must be in (0, 1], got 1.5");
   m.roughness = 0.5f;
   m.specular_f0 = 2;
-  EXPECT_EQ(ErrorOf([&] {
-              scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
-            }),
-            "Scene::AddObject: Material::specular_f0 must be in [0, 1], got 2");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1), RaytraceError,
+      "Scene::AddObject: Material::specular_f0 must be in [0, 1], got 2");
   m.specular_f0 = 0.5f;
   m.emission = {-1, 0, 0};
-  EXPECT_EQ(ErrorOf([&] {
-              scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1);
-            }),
-            "Scene::AddObject: Material::emission must be >= 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(scene.AddObject(MakeBox({1, 1, 1}), m, {}, 1), RaytraceError,
+                                  "Scene::AddObject: Material::emission must be >= 0");
   AreaLight l;
   l.half_v = {0, 0, 0};
   scene.area_lights().push_back(l);
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, PathTraceOptions{}); }),
-            "PathTrace: area light 0: half_u and half_v must span a non-zero area");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      PathTrace(scene, camera, PathTraceOptions{}), RaytraceError,
+      "PathTrace: area light 0: half_u and half_v must span a non-zero area");
   scene.area_lights()[0] = AreaLight{.shape = AreaLight::Shape::kSphere, .radius = 0};
-  EXPECT_EQ(ErrorOf([&] { PathTrace(scene, camera, PathTraceOptions{}); }),
-            "PathTrace: area light 0: radius must be > 0, got 0");
-  EXPECT_EQ(ErrorOf([] { BlackbodyRgb(500); }),
-            "BlackbodyRgb: kelvin must be in [1000, 40000], got 500");
+  PROBELESS_EXPECT_THROWS_MESSAGE(PathTrace(scene, camera, PathTraceOptions{}), RaytraceError,
+                                  "PathTrace: area light 0: radius must be > 0, got 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(BlackbodyRgb(500), RaytraceError,
+                                  "BlackbodyRgb: kelvin must be in [1000, 40000], got 500");
 }
 
 TEST(PathTrace, BlackbodyColours) {

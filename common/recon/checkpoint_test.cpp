@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "probeless/recon/pipeline.h"
+#include "probeless/testing/expect.h"
 #include "src/byte_io.h"
 #include "test_scene.h"
 
@@ -22,16 +23,6 @@ namespace probeless::recon {
 namespace {
 
 using testing::PoseFrom;
-
-template <class Fn>
-std::string ErrorOf(Fn fn) {
-  try {
-    fn();
-  } catch (const ReconError& e) {
-    return e.what();
-  }
-  return "(no error)";
-}
 
 constexpr int64_t kStart = 1'000'000'000LL, kStep = 33'333'333LL;  // 30 fps stamps, ns
 
@@ -119,7 +110,7 @@ TEST(Checkpoint, BrokenOrForeignCheckpointsGiveOneLineAndAnEmptyPipeline) {
   const std::vector<std::byte> good = source.Checkpoint();
   FusionPipeline p(Options());
   auto resume = [&](const std::vector<std::byte>& bytes) {
-    return ErrorOf([&] { p.Resume(bytes, "map.ckpt"); });
+    return probeless::testing::ThrownMessage<ReconError>([&] { p.Resume(bytes, "map.ckpt"); });
   };
   std::vector<std::byte> text(40, std::byte{'x'});
   EXPECT_EQ(resume(text), "map.ckpt: not a fusion checkpoint (expected it to start with PLFUSMAP)");
@@ -158,14 +149,16 @@ TEST(Checkpoint, BrokenOrForeignCheckpointsGiveOneLineAndAnEmptyPipeline) {
   FusionOptions other = Options();
   other.volume.resolution = 128;
   FusionPipeline coarse(other);
-  EXPECT_EQ(ErrorOf([&] { coarse.Resume(good, "map.ckpt"); }),
-            "map.ckpt: written for volume resolution 256, the pipeline has 128");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      coarse.Resume(good, "map.ckpt"), ReconError,
+      "map.ckpt: written for volume resolution 256, the pipeline has 128");
   other = Options();
   other.volume.origin.z = 0.5f;
   FusionPipeline moved(other);
-  EXPECT_EQ(ErrorOf([&] { moved.Resume(good, "map.ckpt"); }),
-            "map.ckpt: written for volume origin (-1.000000, -1.000000, 0.200000), the pipeline "
-            "has (-1.000000, -1.000000, 0.500000)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      moved.Resume(good, "map.ckpt"), ReconError,
+      "map.ckpt: written for volume origin (-1.000000, -1.000000, 0.200000), the pipeline "
+      "has (-1.000000, -1.000000, 0.500000)");
   // The good one still resumes.
   EXPECT_EQ(resume(good), "(no error)");
   EXPECT_EQ(p.Checkpoint(), good);
@@ -199,15 +192,16 @@ TEST(Checkpoint, FilesAreWrittenAtomicallyOnAThreadAndRemovedOnDiscard) {
     writer.Flush();
   }
   EXPECT_FALSE(std::filesystem::exists(path));
-  EXPECT_EQ(ErrorOf([&] { ReadFileIfExists(dir.string()); }),
-            "checkpoint '" + dir.string() + "': cannot read: Is a directory");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ReadFileIfExists(dir.string()), ReconError,
+                                  "checkpoint '" + dir.string() + "': cannot read: Is a directory");
   // A write that fails is reported by the next call.
   const std::string missing = (dir / "no" / "map.ckpt").string();
   CheckpointWriter writer(missing);
   writer.Submit(a);
-  EXPECT_EQ(ErrorOf([&] { writer.Flush(); }), "checkpoint '" + missing + "': cannot create " +
-                                                  missing + ".tmp: No such file or directory");
-  EXPECT_EQ(ErrorOf([&] { writer.Flush(); }), "(no error)");  // reported once
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      writer.Flush(), ReconError,
+      "checkpoint '" + missing + "': cannot create " + missing + ".tmp: No such file or directory");
+  EXPECT_NO_THROW(writer.Flush());  // reported once
   std::filesystem::remove_all(dir);
 }
 

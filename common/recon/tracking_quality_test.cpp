@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "probeless/recon/pipeline.h"
+#include "probeless/testing/expect.h"
 #include "test_scene.h"
 
 namespace probeless::recon {
@@ -25,15 +26,6 @@ namespace {
 using testing::PoseFrom;
 using testing::Scene;
 using testing::TestIntrinsics;
-
-std::string ErrorOf(const TrackingQualityOptions& o) {
-  try {
-    o.Validate();
-  } catch (const ReconError& e) {
-    return e.what();
-  }
-  return "";
-}
 
 double Distance(const Pose& a, const Pose& b) {
   const double dx = a.t[0] - b.t[0], dy = a.t[1] - b.t[1], dz = a.t[2] - b.t[2];
@@ -205,20 +197,24 @@ TEST(TrackingQuality, ScoreInUnitIntervalAndStatesAsDocumented) {
 TEST(TrackingQuality, BadOptionsThrowNamingTheField) {
   TrackingQualityOptions o;
   o.residual_ratio_soft = 4.0f;
-  EXPECT_EQ(ErrorOf(o),
-            "tracking quality: need residual_ratio_good <= residual_ratio_soft < "
-            "residual_ratio_hard");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      o.Validate(), ReconError,
+      "tracking quality: need residual_ratio_good <= residual_ratio_soft < "
+      "residual_ratio_hard");
   o = {};
   o.observability_hard = 0.05f;
-  EXPECT_EQ(ErrorOf(o),
-            "tracking quality: need observability_good >= observability_soft > "
-            "observability_hard");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      o.Validate(), ReconError,
+      "tracking quality: need observability_good >= observability_soft > "
+      "observability_hard");
   o = {};
   o.statistics_alpha = 0;
-  EXPECT_EQ(ErrorOf(o), "tracking quality: statistics_alpha must be in (0, 1]");
+  PROBELESS_EXPECT_THROWS_MESSAGE(o.Validate(), ReconError,
+                                  "tracking quality: statistics_alpha must be in (0, 1]");
   o = {};
   o.max_uncertain_frames = -1;
-  EXPECT_EQ(ErrorOf(o), "tracking quality: max_uncertain_frames must be >= 0");
+  PROBELESS_EXPECT_THROWS_MESSAGE(o.Validate(), ReconError,
+                                  "tracking quality: max_uncertain_frames must be >= 0");
   FusionOptions f;
   f.quality.warmup_frames = 0;
   EXPECT_THROW(FusionPipeline{f}, ReconError);
@@ -232,12 +228,8 @@ TEST(TrackingQuality, BadOptionsThrowNamingTheField) {
   view.points = frame.vertices[0];
   view.normals = frame.normals[0];
   BuildModelPyramid(view, Pose{}, k, 3, model);
-  try {
-    TrackIcp(frame, model, Pose{}, icp, nullptr);
-    ADD_FAILURE() << "no error";
-  } catch (const ReconError& e) {
-    EXPECT_STREQ(e.what(), "icp: observability_block must be >= 1, got 0");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(TrackIcp(frame, model, Pose{}, icp, nullptr), ReconError,
+                                  "icp: observability_block must be >= 1, got 0");
 }
 
 // A floor (y = 0.45) and a back wall (z = 1.8) pin every direction but the slide along x; a left

@@ -7,25 +7,17 @@
 
 #include <algorithm>
 #include <cmath>
-#include <functional>
 #include <numbers>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "probeless/testing/expect.h"
+
 namespace probeless::sh {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
-
-std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const ShError& error) {
-    return error.what();
-  }
-  return "(no error)";
-}
 
 Vec3 Normalised(Vec3 d) {
   const double n = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
@@ -270,33 +262,29 @@ TEST(ShTest, WeightedBasisWithTheNormalisationIsTheBasis) {
 }
 
 TEST(ShTest, BadArgumentsThrowOneLineMessages) {
-  EXPECT_EQ(ErrorOf([] { Basis(6, {0, 0, 1}); }), "sh::Basis: bands 6 out of range 1..5");
-  EXPECT_EQ(ErrorOf([] {
-              DirectionalLight({0, 0, 1}, 1, 0);
-            }),
-            "sh::DirectionalLight: bands 0 out of range 1..5");
-  EXPECT_EQ(ErrorOf([] {
-              Evaluate(std::vector<double>(5), {0, 0, 1});
-            }),
-            "sh::Evaluate: 5 coefficients is not a square 1..25");
-  EXPECT_EQ(ErrorOf([] {
-              DirectionalPower(std::vector<double>(1), {0, 0, 1});
-            }),
-            "sh::DirectionalPower: 1 coefficients is not a square 4..25");
-  EXPECT_EQ(ErrorOf([] {
-              std::vector<double> c(4);
-              ConvolveClampedCosine(c, 3);
-            }),
-            "sh::ConvolveClampedCosine: 4 coefficients, expected 9");
-  EXPECT_EQ(ErrorOf([] { GaussLegendreRule(0); }),
-            "sh::GaussLegendreRule: n_z 0 out of range 1..512");
-  EXPECT_EQ(ErrorOf([] { ProjectMonteCarlo([](const Vec3&) { return 1.0; }, 3, 0, 1); }),
-            "sh::ProjectMonteCarlo: samples 0 must be >= 1");
+  PROBELESS_EXPECT_THROWS_MESSAGE(Basis(6, {0, 0, 1}), ShError,
+                                  "sh::Basis: bands 6 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(DirectionalLight({0, 0, 1}, 1, 0), ShError,
+                                  "sh::DirectionalLight: bands 0 out of range 1..5");
+  PROBELESS_EXPECT_THROWS_MESSAGE(Evaluate(std::vector<double>(5), {0, 0, 1}), ShError,
+                                  "sh::Evaluate: 5 coefficients is not a square 1..25");
+  PROBELESS_EXPECT_THROWS_MESSAGE(DirectionalPower(std::vector<double>(1), {0, 0, 1}), ShError,
+                                  "sh::DirectionalPower: 1 coefficients is not a square 4..25");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      {
+        std::vector<double> c(4);
+        ConvolveClampedCosine(c, 3);
+      },
+      ShError, "sh::ConvolveClampedCosine: 4 coefficients, expected 9");
+  PROBELESS_EXPECT_THROWS_MESSAGE(GaussLegendreRule(0), ShError,
+                                  "sh::GaussLegendreRule: n_z 0 out of range 1..512");
+  PROBELESS_EXPECT_THROWS_MESSAGE(ProjectMonteCarlo([](const Vec3&) { return 1.0; }, 3, 0, 1),
+                                  ShError, "sh::ProjectMonteCarlo: samples 0 must be >= 1");
   std::vector<float> coefficients(9), image(10);
-  EXPECT_EQ(ErrorOf([&] { RenderLatLong(coefficients, 3, 1, 4, 2, image); }),
-            "sh::RenderLatLong: output holds 10 floats, expected 8");
-  EXPECT_EQ(ErrorOf([&] { RenderLatLong(coefficients, 3, 5, 4, 2, image); }),
-            "sh::RenderLatLong: channels 5 out of range 1..4");
+  PROBELESS_EXPECT_THROWS_MESSAGE(RenderLatLong(coefficients, 3, 1, 4, 2, image), ShError,
+                                  "sh::RenderLatLong: output holds 10 floats, expected 8");
+  PROBELESS_EXPECT_THROWS_MESSAGE(RenderLatLong(coefficients, 3, 5, 4, 2, image), ShError,
+                                  "sh::RenderLatLong: channels 5 out of range 1..4");
 }
 
 }  // namespace

@@ -3,8 +3,6 @@
 
 #include <array>
 #include <cmath>
-
-#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -15,6 +13,7 @@
 #include "probeless/msgs/sh_light.h"
 #include "probeless/sim/scenario.h"
 #include "probeless/sim/simulator.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::sim {
 namespace {
@@ -33,13 +32,10 @@ Scenario Small(Scenario s, uint64_t frames) {
   return s;
 }
 
+// The message of the ScenarioError parsing `yaml` as f.yaml throws.
 std::string ErrorOf(const std::string& yaml) {
-  try {
-    ParseScenario(yaml, "f.yaml", "/nonexistent");
-  } catch (const ScenarioError& e) {
-    return e.what();
-  }
-  return "no error";
+  return probeless::testing::ThrownMessage<ScenarioError>(
+      [&] { ParseScenario(yaml, "f.yaml", "/nonexistent"); });
 }
 
 TEST(Scenario, ShippedScenariosLoad) {
@@ -76,12 +72,8 @@ TEST(Scenario, ErrorsNameFileAndLine) {
             "f.yaml:4: camera.path[1].t: keyframe times must increase");
   EXPECT_EQ(ErrorOf("camera: [1, 2\n").rfind("f.yaml:", 0), 0u);
   EXPECT_NE(ErrorOf("camera: [1, 2\n").find(": YAML syntax error: "), std::string::npos);
-  try {
-    LoadScenario("/nonexistent/x.yaml");
-    FAIL();
-  } catch (const ScenarioError& e) {
-    EXPECT_STREQ(e.what(), "/nonexistent/x.yaml: cannot open scenario file");
-  }
+  PROBELESS_EXPECT_THROWS_MESSAGE(LoadScenario("/nonexistent/x.yaml"), ScenarioError,
+                                  "/nonexistent/x.yaml: cannot open scenario file");
 }
 
 TEST(Simulator, SameSeedGivesByteIdenticalFrames) {

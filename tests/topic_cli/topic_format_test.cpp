@@ -14,19 +14,10 @@
 #include <vector>
 
 #include "probeless/msgs/msgs.h"
+#include "probeless/testing/expect.h"
 
 namespace probeless::tools {
 namespace {
-
-template <class F>
-std::string ErrorOf(F f) {
-  try {
-    f();
-  } catch (const UsageError& e) {
-    return e.what();
-  }
-  return "no error";
-}
 
 // --- Arguments ---------------------------------------------------------------------------------
 
@@ -50,7 +41,7 @@ TEST(ParseArgsTest, SplitsPositionalsAndOptionsInAnyOrder) {
 
 TEST(ParseArgsTest, RejectsWithPreciseMessages) {
   auto parse = [](std::vector<std::string> args) {
-    return ErrorOf([&] { ParseArgs(args, kSpecs); });
+    return probeless::testing::ThrownMessage<UsageError>([&] { ParseArgs(args, kSpecs); });
   };
   EXPECT_EQ(parse({"/a", "--bogus"}), "unknown option '--bogus'");
   EXPECT_EQ(parse({"--bogus=1"}), "unknown option '--bogus'");
@@ -63,16 +54,18 @@ TEST(ParseArgsTest, CountsAndSeconds) {
   EXPECT_EQ(ParseCount("-n", "9223372036854775807"), 9223372036854775807u);
   EXPECT_EQ(ParseCount("-n", "+3"), 3u);  // parse::ParseInteger's rules, as every option
   for (const char* bad : {"0", "-1", "3x", "", "abc", "9223372036854775808", "1.5", " 3"}) {
-    EXPECT_EQ(ErrorOf([&] { ParseCount("-n", bad); }),
-              std::string("-n expects a positive integer, got '") + bad + "'");
+    PROBELESS_EXPECT_THROWS_MESSAGE(
+        ParseCount("-n", bad), UsageError,
+        std::string("-n expects a positive integer, got '") + bad + "'");
   }
   EXPECT_DOUBLE_EQ(ParseSeconds("--duration", "2"), 2.0);
   EXPECT_DOUBLE_EQ(ParseSeconds("--duration", "0.25"), 0.25);
   EXPECT_DOUBLE_EQ(ParseSeconds("--duration", "0"), 0.0);
   EXPECT_DOUBLE_EQ(ParseSeconds("--duration", "1e3"), 1000.0);
   for (const char* bad : {"-1", "soon", "", "1s", "inf", "nan", "1e400", "0x10"}) {
-    EXPECT_EQ(ErrorOf([&] { ParseSeconds("--timeout", bad); }),
-              std::string("--timeout expects a non-negative number of seconds, got '") + bad + "'");
+    PROBELESS_EXPECT_THROWS_MESSAGE(
+        ParseSeconds("--timeout", bad), UsageError,
+        std::string("--timeout expects a non-negative number of seconds, got '") + bad + "'");
   }
 }
 
@@ -357,7 +350,8 @@ TEST(RateWindowTest, RebaselinesOnPublisherChangesAndWaitsForNewMessages) {
   EXPECT_NEAR(stats->rate_hz, 5 / 0.5, 1e-9);  // 3 in 300 ms and 2 in 200 ms
   EXPECT_NEAR(stats->min_period_s, 0.1, 1e-12);
   EXPECT_NEAR(stats->max_period_s, 0.1, 1e-12);
-  EXPECT_EQ(ErrorOf([] { RateWindow(0); }), "the rate window must hold at least 1 message");
+  PROBELESS_EXPECT_THROWS_MESSAGE(RateWindow(0), UsageError,
+                                  "the rate window must hold at least 1 message");
 }
 
 TEST(RateWindowTest, RateBetweenTwoReadings) {
