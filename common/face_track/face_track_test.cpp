@@ -295,7 +295,7 @@ TEST(LightOutput, JsonLayouts) {
   PROBELESS_EXPECT_THROWS_MESSAGE(
       LightJson(c, (std::array<float, 3>{0, 0, -1}), 2.5f, 0.75f, colour, 42, "camera",
                 msgs::ShLightUnits::kFaceModel),
-      std::invalid_argument,
+      InputError,
       "LightJson: the ARKit and WebXR exports take linear radiance, got face_model units");
 }
 
@@ -450,7 +450,7 @@ TEST(LightHold, BacklitFaceDoesNotBrightenTheVirtualObject) {
   EXPECT_FLOAT_EQ(c.coefficients[0][1], wrong[0][1]);
   for (int n = 1; n < 9; ++n) EXPECT_EQ(c.coefficients[n][0], 0.f);
   PROBELESS_EXPECT_THROWS_MESSAGE(
-      LightHold bad(HoldOptions{.min_confidence = 0.1, .blend_time_s = 0}), std::invalid_argument,
+      LightHold bad(HoldOptions{.min_confidence = 0.1, .blend_time_s = 0}), InputError,
       "LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
 }
 

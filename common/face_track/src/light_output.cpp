@@ -7,6 +7,7 @@
 #include <span>
 #include <stdexcept>
 
+#include "probeless/error/error.h"
 #include "probeless/sh/sh.h"
 
 namespace probeless::face_track {
@@ -129,7 +130,7 @@ fl::LightEstimate LightSmoother::Update(const fl::LightEstimate& estimate) {
 LightHold::LightHold(const HoldOptions& options) : options_(options) {
   if (!(options_.min_confidence >= 0 && options_.min_confidence <= 1) ||
       !(options_.blend_time_s > 0)) {
-    throw std::invalid_argument("LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
+    throw InputError("LightHold: min_confidence must be in [0, 1] and blend_time_s > 0");
   }
 }
 
@@ -205,7 +206,7 @@ std::string LightJson(const Sh9Rgb& coefficients_camera, const std::array<float,
                       int64_t stamp_ns, const std::string& frame_id, msgs::ShLightUnits units) {
   if (units != msgs::ShLightUnits::kLinear) {
     const std::string_view name = msgs::ShLightUnitsName(units);
-    throw std::invalid_argument(
+    throw InputError(
         "LightJson: the ARKit and WebXR exports take linear radiance, got " +
         (name.empty() ? std::to_string(static_cast<uint32_t>(units)) : std::string(name)) +
         " units");

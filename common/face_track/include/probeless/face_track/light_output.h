@@ -85,7 +85,7 @@ class LightHold {
     bool held = false;                 // the input was below min_confidence
     double weight = 1;                 // w (1 for a confident input)
   };
-  // Throws std::invalid_argument unless 0 <= min_confidence <= 1 and blend_time_s > 0.
+  // Throws InputError unless 0 <= min_confidence <= 1 and blend_time_s > 0.
   explicit LightHold(const HoldOptions& options = {});
   Output Update(const Sh9Rgb& coefficients, const std::array<float, 3>& direction, float intensity,
                 float confidence, int64_t stamp_ns);
@@ -108,7 +108,7 @@ class LightHold {
 // ARKit and WebXR coefficient order and sign conventions are documented in docs/face_light.md;
 // the values are this project's SH convention converted to theirs (y up, z towards the viewer).
 // ARKit and WebXR shade with linear radiance, so `units` must be msgs::ShLightUnits::kLinear (the
-// light's msgs::ShLight units); anything else throws std::invalid_argument naming the units.
+// light's msgs::ShLight units); anything else throws InputError naming the units.
 std::string LightJson(const Sh9Rgb& coefficients_camera, const std::array<float, 3>& direction,
                       float intensity, float confidence, const std::array<float, 3>& colour,
                       int64_t stamp_ns, const std::string& frame_id, msgs::ShLightUnits units);
