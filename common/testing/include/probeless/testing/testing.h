@@ -21,20 +21,17 @@
 #include <thread>
 #include <vector>
 
+#include "probeless/testing/expect.h"
+
 extern char** environ;
 
 namespace probeless::testing {
 
-// The message of the std::exception `f` throws, "(no error)" if it returns normally: tests assert
-// the one-line messages of bad input with it.
+// The message of the std::exception `f` throws, kNoException ("(no error)") if it returns
+// normally: ThrownMessage (expect.h) for callables of any return type.
 template <class Fn>
 std::string ErrorOf(Fn&& f) {
-  try {
-    f();
-  } catch (const std::exception& e) {
-    return e.what();
-  }
-  return "(no error)";
+  return ThrownMessage([&] { f(); });
 }
 
 // The whole file `path` as text ("" if it cannot be read).
