@@ -7,6 +7,8 @@
 
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <thread>
 
 #include "probeless/msgs/msgs.h"
@@ -231,6 +233,51 @@ TEST_F(NodeBusTest, SpinAcknowledgesEveryInputAfterItsHandler) {
   });
   ASSERT_TRUE(WIFEXITED(status));
   EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
+// With $PROBELESS_NODE_STATS, Node::Spin writes <dir>/<node>.json when it returns: the inputs
+// handled with their bus counters and handler times, the outputs published, every call.
+TEST_F(NodeBusTest, SpinWritesRunStatsWhenAsked) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("node_stats_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const int status = RunInChild([&] {
+    setenv("PROBELESS_NODE_STATS", dir.c_str(), 1);
+    Node node(Argv({"--ros-args", "-r", "__ns:=/lab"}), "timed");
+    bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
+    bus::Publisher out = node.CreatePublisher<msgs::Pose>("out");
+    bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
+    for (int i = 0; i < 3; ++i) {
+      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
+      msgs::WriteMessage<msgs::Pose>(loan.data());
+      pub.Publish(std::move(loan));
+    }
+    int handled = 0;
+    node.Spin({{&input, [&](bus::Sample&&) {
+                  std::this_thread::sleep_for(2ms);
+                  bus::Loan loan = out.Borrow(sizeof(msgs::Pose));
+                  msgs::WriteMessage<msgs::Pose>(loan.data());
+                  out.Publish(std::move(loan));
+                  if (++handled == 3) RequestShutdown();
+                }}});
+    return 0;
+  });
+  ASSERT_TRUE(WIFEXITED(status));
+  ASSERT_EQ(WEXITSTATUS(status), 0);
+  std::ifstream file(dir / "lab.timed.json");
+  const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  std::filesystem::remove_all(dir);
+  EXPECT_NE(text.find("\"node\": \"/lab/timed\""), std::string::npos) << text;
+  const std::string input =
+      "{\"topic\": \"/lab/pose\", \"handled\": 3, \"received\": 3, \"dropped\": 0, "
+      "\"handler_ms\": {\"p50\": ";
+  const size_t at = text.find(input);
+  ASSERT_NE(at, std::string::npos) << text;
+  EXPECT_GE(std::stod(text.substr(at + input.size())), 2.0) << text;  // the handler's 2 ms sleep
+  EXPECT_NE(text.find("{\"topic\": \"/lab/out\", \"published\": 3}"), std::string::npos) << text;
+  EXPECT_NE(text.find("{\"topic\": \"/lab/timed/ack\", \"published\": 3}"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("\"calls\": [\n  ["), std::string::npos) << text;
 }
 
 }  // namespace

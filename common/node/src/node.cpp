@@ -1,5 +1,7 @@
 #include "probeless/node/node.h"
 
+#include <sys/resource.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -8,6 +10,7 @@
 #include <climits>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -96,6 +99,37 @@ bool ConvertParam(const ParamValue& value, T& out) {
   return false;
 }
 
+int64_t MonotonicNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+
+// Handler timing of one Spin input (only with $PROBELESS_NODE_STATS).
+struct InputTiming {
+  const bus::Subscriber* subscriber = nullptr;
+  std::vector<int64_t> durations_ns;
+};
+struct HandlerCall {
+  int64_t start_ns = 0;
+  int64_t duration_ns = 0;
+  size_t input = 0;
+};
+constexpr size_t kMaxRecordedCalls = 100000;
+
+double Quantile(std::vector<int64_t> values, double q) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const size_t index = std::min(values.size() - 1, static_cast<size_t>(q * values.size()));
+  return static_cast<double>(values[index]) * 1e-6;
+}
+
+std::string StatsFileName(std::string fqn) {
+  if (fqn.starts_with('/')) fqn.erase(0, 1);
+  std::replace(fqn.begin(), fqn.end(), '/', '.');
+  return (fqn.empty() ? std::string("root") : fqn) + ".json";
+}
+
 }  // namespace
 
 std::string_view LogLevelName(LogLevel level) {
@@ -147,6 +181,7 @@ struct Node::Impl {
   std::mutex ack_mutex;      // guards ack_publisher and acks
   std::optional<bus::Publisher> ack_publisher;
   uint64_t acks = 0;
+  int64_t created_mono_ns = MonotonicNs();
   std::atomic<int> log_level{static_cast<int>(LogLevel::kInfo)};
 
   std::string Prefix() const { return "node '" + (fqn.empty() ? name : fqn) + "': "; }
@@ -352,19 +387,104 @@ void Node::Ack(const bus::Subscriber& from, const bus::MessageInfo& input) {
   impl_->ack_publisher->Publish(std::move(loan));
 }
 
+namespace {
+
+// The run statistics of Node::Spin (top of node.h) into <dir>/<node>.json.
+void WriteRunStats(const Node& node, int64_t created_mono_ns, const char* dir,
+                   const std::vector<InputTiming>& inputs, const std::vector<HandlerCall>& calls) {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + t.tv_usec * 1e-6; };
+  const int pid = static_cast<int>(getpid());
+  // This process's participants in the registry: received/dropped of the inputs, published.
+  std::map<std::string, std::pair<uint64_t, uint64_t>> received_dropped;
+  std::map<std::string, uint64_t> published;
+  for (const bus::TopicSnapshot& topic : bus::ListTopics()) {
+    for (const bus::SubscriberSnapshot& s : topic.subscribers) {
+      if (s.pid != pid) continue;
+      auto& [received, dropped] = received_dropped[topic.topic];
+      received += s.received;
+      dropped += s.dropped;
+    }
+    for (const bus::PublisherSnapshot& p : topic.publishers) {
+      if (p.pid == pid) published[topic.topic] += p.published;
+    }
+  }
+  std::ostringstream out;
+  out.precision(9);
+  out << "{\"node\": \"" << node.fully_qualified_name() << "\", \"pid\": " << pid
+      << ", \"wall_s\": " << (MonotonicNs() - created_mono_ns) * 1e-9
+      << ", \"cpu_user_s\": " << seconds(usage.ru_utime)
+      << ", \"cpu_system_s\": " << seconds(usage.ru_stime) << ",\n \"inputs\": [";
+  for (size_t i = 0; i < inputs.size(); ++i) {
+    const InputTiming& input = inputs[i];
+    const std::string& topic = input.subscriber->topic();
+    int64_t total = 0;
+    for (int64_t d : input.durations_ns) total += d;
+    const auto counters = received_dropped.find(topic);
+    out << (i ? ",\n  " : "\n  ") << "{\"topic\": \"" << topic
+        << "\", \"handled\": " << input.durations_ns.size()
+        << ", \"received\": " << (counters == received_dropped.end() ? 0 : counters->second.first)
+        << ", \"dropped\": " << input.subscriber->dropped()
+        << ", \"handler_ms\": {\"p50\": " << Quantile(input.durations_ns, 0.5)
+        << ", \"p99\": " << Quantile(input.durations_ns, 0.99)
+        << ", \"max\": " << Quantile(input.durations_ns, 1.0)
+        << "}, \"handler_total_s\": " << total * 1e-9 << "}";
+  }
+  out << "],\n \"outputs\": [";
+  bool first = true;
+  for (const auto& [topic, count] : published) {
+    out << (first ? "\n  " : ",\n  ") << "{\"topic\": \"" << topic << "\", \"published\": " << count
+        << "}";
+    first = false;
+  }
+  out << "],\n \"calls\": [";
+  for (size_t c = 0; c < calls.size(); ++c) {
+    out << (c ? (c % 8 == 0 ? ",\n  " : ", ") : "\n  ") << "[" << calls[c].start_ns << ", "
+        << calls[c].duration_ns << ", " << calls[c].input << "]";
+  }
+  out << "]}\n";
+  const std::string path = std::string(dir) + "/" + StatsFileName(node.fully_qualified_name());
+  std::ofstream file(path);
+  file << out.str();
+  if (!file) node.Warn() << "cannot write the run statistics to " << path;
+}
+
+}  // namespace
+
 void Node::Spin(const std::vector<Handler>& handlers) {
+  const char* stats_dir = std::getenv("PROBELESS_NODE_STATS");
+  const bool timed = stats_dir != nullptr && *stats_dir != '\0';
+  std::vector<InputTiming> inputs(handlers.size());
+  std::vector<HandlerCall> calls;
   std::vector<Handler> acking;
   acking.reserve(handlers.size());
-  for (const Handler& handler : handlers) {
-    bus::Subscriber* subscriber = handler.subscriber;
-    auto on_sample = handler.on_sample;
-    acking.push_back({subscriber, [this, subscriber, on_sample](bus::Sample&& sample) {
-                        const bus::MessageInfo info = sample.info();
-                        on_sample(std::move(sample));
-                        Ack(*subscriber, info);
-                      }});
+  for (size_t i = 0; i < handlers.size(); ++i) {
+    bus::Subscriber* subscriber = handlers[i].subscriber;
+    auto on_sample = handlers[i].on_sample;
+    inputs[i].subscriber = subscriber;
+    if (!timed) {
+      acking.push_back({subscriber, [this, subscriber, on_sample](bus::Sample&& sample) {
+                          const bus::MessageInfo info = sample.info();
+                          on_sample(std::move(sample));
+                          Ack(*subscriber, info);
+                        }});
+      continue;
+    }
+    InputTiming* timing = &inputs[i];
+    acking.push_back(
+        {subscriber, [this, subscriber, on_sample, timing, &calls, i](bus::Sample&& sample) {
+           const bus::MessageInfo info = sample.info();
+           const int64_t start = MonotonicNs();
+           on_sample(std::move(sample));
+           const int64_t duration = MonotonicNs() - start;
+           timing->durations_ns.push_back(duration);
+           if (calls.size() < kMaxRecordedCalls) calls.push_back({start, duration, i});
+           Ack(*subscriber, info);
+         }});
   }
   node::Spin(acking);
+  if (timed) WriteRunStats(*this, impl_->created_mono_ns, stats_dir, inputs, calls);
 }
 
 const std::string& Node::name() const { return impl_->name; }

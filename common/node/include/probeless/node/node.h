@@ -23,6 +23,14 @@
 // - Shutdown: the first SIGINT/SIGTERM makes ok() false and wakes WaitForShutdown/Spin/Rate at
 //   once (Spin polls the WaitSet at most kShutdownPollPeriod apart); a second one exits the process
 //   immediately with status 128 + signal (130 for SIGINT).
+// - Run statistics (for tools/graph_bench): with $PROBELESS_NODE_STATS set to a directory,
+// Node::Spin
+//   times every handler call and, when it returns, writes <dir>/<fqn without the leading '/',
+//   '/' -> '.'>.json: pid, wall and CPU seconds (getrusage: all threads) since the Node was made,
+//   per input topic the samples handled, the bus's received/dropped counters and the handler time
+//   (p50/p99/max ms, total s), per output topic the messages published (this process's
+//   publishers, read from the bus registry), and every handler call as [start CLOCK_MONOTONIC ns,
+//   duration ns, input index] (the first 100000). Unset (the default): nothing is timed or written.
 //
 // Errors: bad arguments, params files, parameter types and topic names throw NodeError with one
 // line naming the node (once known) and the problem.
@@ -235,7 +243,9 @@ class Node {
   // every handler; a node that finishes its inputs elsewhere (e.g. on a worker thread) calls it
   // itself. Thread-safe; the publisher is created on first use.
   void Ack(const bus::Subscriber& from, const bus::MessageInfo& input);
-  // node::Spin(handlers), acknowledging every sample once its handler has returned.
+  // node::Spin(handlers), acknowledging every sample once its handler has returned; with
+  // $PROBELESS_NODE_STATS set, also timing each handler and writing the run statistics when it
+  // returns (top of file).
   void Spin(const std::vector<Handler>& handlers);
 
   // Shortcuts for the process-wide functions above.
