@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "probeless/render/viewer_click.h"
+
 namespace probeless::render::internal {
 
 class Context {
@@ -17,6 +19,9 @@ class Context {
   // Window back-end: swap, events, keys, close state and framebuffer size.
   virtual void SwapAndPoll() {}
   virtual std::vector<int> TakeKeys() { return {}; }
+  // Window back-end: polls events and returns the left-button presses since the last call, oldest
+  // first, in window coordinates (ClickQueue's bound). Contexts without a window report none.
+  virtual std::vector<WindowClick> TakeClicks() { return {}; }
   virtual bool Closed() const { return false; }
   virtual std::array<int, 2> FramebufferSize() const { return {0, 0}; }
   // Window back-end: the display server has closed the connection. Thread-safe (reads the

@@ -77,6 +77,28 @@ class GlfwContext final : public Context {
       self->keys_.push_back(key);
       if (key == GLFW_KEY_ESCAPE) glfwSetWindowShouldClose(w, GLFW_TRUE);
     });
+    // The press's position is the last one the event stream reported (motion and enter events
+    // precede the press in order), not the pointer's position when the events are polled, which
+    // can be a frame later.
+    glfwSetCursorPosCallback(window_, [](GLFWwindow* w, double x, double y) {
+      auto* self = static_cast<GlfwContext*>(glfwGetWindowUserPointer(w));
+      self->cursor_ = {x, y};
+      self->cursor_known_ = true;
+    });
+    glfwSetMouseButtonCallback(window_, [](GLFWwindow* w, int button, int action, int) {
+      if (button != GLFW_MOUSE_BUTTON_LEFT || action != GLFW_PRESS) return;
+      auto* self = static_cast<GlfwContext*>(glfwGetWindowUserPointer(w));
+      WindowClick click;
+      if (self->cursor_known_) {
+        click.x = self->cursor_[0];
+        click.y = self->cursor_[1];
+      } else {
+        glfwGetCursorPos(w, &click.x, &click.y);
+      }
+      glfwGetWindowSize(w, &click.window_width, &click.window_height);
+      glfwGetFramebufferSize(w, &click.framebuffer_width, &click.framebuffer_height);
+      self->clicks_.Push(click);
+    });
   }
   ~GlfwContext() override {
     if (DisplayLost()) return;  // nothing to tear down on a dead connection (Xlib would exit)
@@ -97,6 +119,10 @@ class GlfwContext final : public Context {
     keys.swap(keys_);
     return keys;
   }
+  std::vector<WindowClick> TakeClicks() override {
+    glfwPollEvents();
+    return clicks_.Take();
+  }
   bool Closed() const override { return glfwWindowShouldClose(window_); }
   bool DisplayLost() const override {
     if (display_fd_ < 0) return false;
@@ -116,6 +142,9 @@ class GlfwContext final : public Context {
  private:
   GLFWwindow* window_ = nullptr;
   std::vector<int> keys_;
+  ClickQueue clicks_;
+  std::array<double, 2> cursor_{0, 0};  // window coordinates
+  bool cursor_known_ = false;
   int display_fd_ = -1;  // the X connection's socket (X11 platform only)
 };
 

@@ -815,6 +815,19 @@ void ApplyDifferential(const DifferentialResult& r, int width, int height,
   }
 }
 
+raytrace::Vec3 GroupCentre(std::span<const raytrace::Mesh* const> meshes) {
+  if (meshes.empty()) throw RenderError("render::GroupCentre: no meshes");
+  Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
+  for (const raytrace::Mesh* m : meshes) {
+    for (const Vec3& p : m->positions) {
+      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+  }
+  if (!(lo.x <= hi.x)) throw RenderError("render::GroupCentre: the meshes have no vertices");
+  return {(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+}
+
 std::optional<raytrace::Transform> PlaceOnSurface(const light::GeometryView& g, double u, double v,
                                                   const raytrace::Transform& camera_to_world,
                                                   std::span<const raytrace::Mesh* const> meshes) {
@@ -850,15 +863,7 @@ std::optional<raytrace::Transform> PlaceOnSurface(const light::GeometryView& g, 
   const Vec3 nw = camera_to_world.ApplyDirection({static_cast<float>(n[0] / len),
                                                   static_cast<float>(n[1] / len),
                                                   static_cast<float>(n[2] / len)});
-  Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
-  for (const raytrace::Mesh* m : meshes) {
-    for (const Vec3& p : m->positions) {
-      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    }
-  }
-  if (!(lo.x <= hi.x)) throw RenderError("render::PlaceOnSurface: the meshes have no vertices");
-  const Vec3 c{(lo.x + hi.x) / 2, (lo.y + hi.y) / 2, (lo.z + hi.z) / 2};
+  const Vec3 c = GroupCentre(meshes);
   double h = 0;
   for (const raytrace::Mesh* m : meshes) {
     for (const Vec3& p : m->positions) {

@@ -175,6 +175,9 @@ struct Renderer::Impl {
   std::vector<uint8_t> readback;
   std::vector<float> cpu_real, cpu_with;
   std::vector<GLuint> panel_textures;
+  // What the last Present showed, for TakeClicks: the composite's size and the panels' rects.
+  int presented_width = 0, presented_height = 0;
+  std::vector<PixelRect> presented_panels;
 
   GLuint Compile(GLenum type, const std::string& source, const char* name) {
     const GLuint s = gl.CreateShader(type);
@@ -763,15 +766,17 @@ void Renderer::Present(const std::vector<Panel>& panels, Composite* capture) {
   gl.UseProgram(m.blit_program);
   gl.Uniform1i(m.Loc(m.blit_program, "u_flip"), 1);
   gl.BindVertexArray(m.empty_vao);
-  // The composite, letterboxed to keep its aspect ratio.
-  if (m.width > 0) {
-    const double scale =
-        std::min(static_cast<double>(ww) / m.width, static_cast<double>(wh) / m.height);
-    const int dw = static_cast<int>(m.width * scale), dh = static_cast<int>(m.height * scale);
-    gl.Viewport((ww - dw) / 2, (wh - dh) / 2, dw, dh);
+  // The composite, letterboxed to keep its aspect ratio (the rect WindowToImagePixel inverts).
+  const PixelRect shown = LetterboxRect(m.width, m.height, ww, wh);
+  if (shown.w > 0 && shown.h > 0) {
+    gl.Viewport(shown.x, wh - shown.y - shown.h, shown.w, shown.h);
     m.BindTexture(m.blit_program, "u_image", 0, m.out_color);
     gl.DrawArrays(GL_TRIANGLES, 0, 3);
   }
+  m.presented_width = m.width;
+  m.presented_height = m.height;
+  m.presented_panels.clear();
+  for (const Panel& p : panels) m.presented_panels.push_back({p.x, p.y, p.w, p.h});
   while (m.panel_textures.size() < panels.size()) {
     m.panel_textures.push_back(m.MakeTexture(GL_RGB8, 1, 1, GL_RGB, GL_UNSIGNED_BYTE, GL_LINEAR));
   }
@@ -812,6 +817,17 @@ void Renderer::Present(const std::vector<Panel>& panels, Composite* capture) {
 std::vector<int> Renderer::TakeKeys() {
   if (!impl_->context->is_window()) throw RenderError("TakeKeys needs the window back-end");
   return impl_->context->TakeKeys();
+}
+
+std::vector<ViewerClick> Renderer::TakeClicks() {
+  Impl& m = *impl_;
+  std::vector<ViewerClick> clicks;
+  for (const WindowClick& c : m.context->TakeClicks()) {
+    const auto pixel =
+        WindowToImagePixel(c, m.presented_width, m.presented_height, m.presented_panels);
+    if (pixel) clicks.push_back(*pixel);
+  }
+  return clicks;
 }
 
 bool Renderer::WindowClosed() const { return impl_->context->Closed(); }

@@ -231,8 +231,13 @@ void ApplyDifferential(const DifferentialResult& result, int width, int height,
 // within 2 px) and its normal n (the mean of the valid normals within 2 px, facing the camera) in
 // the world frame; the group's bounding-box centre c moves to x + n h, h = max over vertices of
 // (c - v) . n (so its lowest point along n touches the surface). nullopt when there is no surface
-// there. Throws RenderError for a pixel outside the image or no meshes, LightError for an invalid
-// view.
+// there. Throws RenderError for a pixel outside the image, no meshes or no vertices, LightError for
+// an invalid view.
+// The bounding-box centre of `meshes` taken as one group: the point PlaceOnSurface puts x + n h
+// (so the group's world position after that move is this centre plus its translation). Throws
+// RenderError for no meshes or no vertices.
+raytrace::Vec3 GroupCentre(std::span<const raytrace::Mesh* const> meshes);
+
 std::optional<raytrace::Transform> PlaceOnSurface(const light::GeometryView& g, double u, double v,
                                                   const raytrace::Transform& camera_to_world,
                                                   std::span<const raytrace::Mesh* const> meshes);

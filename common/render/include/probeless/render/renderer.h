@@ -39,6 +39,7 @@
 #include "probeless/prt/prt.h"
 #include "probeless/raytrace/geometry.h"
 #include "probeless/raytrace/scene.h"
+#include "probeless/render/viewer_click.h"
 
 namespace probeless::render {
 
@@ -217,6 +218,13 @@ class Renderer {
   void Present(const std::vector<Panel>& panels, Composite* capture = nullptr);
   // Keys pressed since the last call (GLFW key codes; letters are 'A'..'Z', Escape 256).
   std::vector<int> TakeKeys();
+  // Left-button clicks on the shown composite since the last call, oldest first, in pixels of the
+  // frame the last Present showed (WindowToImagePixel: letterboxing and a resized or scaled window
+  // accounted for; clicks on the black bars or on a panel are not reported; at most
+  // ClickQueue::kCapacity, the newest). Polls the window's events. Empty before the first Present
+  // and for the offscreen back-end (no window, no clicks; it does not throw, so a caller need not
+  // know the back-end).
+  std::vector<ViewerClick> TakeClicks();
   // True once the user closed the window (or pressed Escape).
   bool WindowClosed() const;
   // Window back-end: the X display has gone (server died or closed the connection); false for

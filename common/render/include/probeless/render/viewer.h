@@ -3,7 +3,8 @@
 // pose). Panels are drawn on the CPU (testable without GL) and shown by Renderer::Present.
 //
 // Keys: L light sphere, M lat-long map, F face samples, G geometry buffer, P pose, H all off/on,
-// Escape or Q closes.
+// Escape or Q closes. Mouse: left clicks on the composite come from Renderer::TakeClicks in image
+// pixels (viewer_click.h); the renderer node places the objects there (scene mode).
 #pragma once
 
 #include <span>
