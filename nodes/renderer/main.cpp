@@ -31,12 +31,21 @@
 // ssdo_threads, differential_step, differential_smooth, differential_tone (ratio | fixed | key),
 // differential_key, indirect, sun_shadow (with differential_tone ratio: the crisp cast shadow of
 // the light's directional part, render::DifferentialOptions::sun_shadow),
-// object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there). Exit: 0 on
-// shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's X display
-// goes away (one line on stderr).
+// object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there).
+//
+// Click to place (backend window, scene mode): a left click on the composite in the viewer window
+// places the objects like object_pixel at the clicked pixel (render::Renderer::TakeClicks converts
+// window coordinates to image pixels), on the next frame with G_r, with the same
+// render::PlaceOnSurface; each new click moves them again. One info line per click ("viewer click
+// at pixel [u, v]: objects rest on the surface there, centre at (x, y, z) m, world frame"); a pixel
+// without surface: one warning, the objects stay. Face mode ignores clicks (one info line).
+//
+// Exit: 0 on shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's
+// X display goes away (one line on stderr).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <exception>
@@ -217,9 +226,29 @@ int Run(int argc, char** argv) {
   std::vector<float> real_depth, real_normals, transfer_real, transfer_virtual;
   std::vector<uint8_t> real_colour, camera_diff;
   msgs::ShLight light_msg;
-  // The objects' placement (object_pixel moves them once, at the first frame with G_r).
+  // The objects' placement (object_pixel moves them once, at the first frame with G_r; in scene
+  // mode each click in the viewer window moves them again).
   std::vector<raytrace::Transform> placement(content.objects.size());
   bool placed = object_pixel.empty();
+  const bool click_placement = backend == render::Backend::kWindow && mode == "scene";
+  std::vector<render::ViewerClick> pending_clicks;  // taken from the window, waiting for G_r
+  bool told_click_mode = false;
+  std::vector<const raytrace::Mesh*> object_meshes;
+  for (const auto& o : content.objects) object_meshes.push_back(&o.mesh.mesh);
+  // The ARKit-style hit test shared by object_pixel and clicks (render::PlaceOnSurface): all
+  // objects rest on the surface seen at (u, v); returns the group's new centre (world frame), or
+  // nullopt when there is no surface there (the objects stay).
+  auto place_at = [&](const light::GeometryView& g, double u, double v,
+                      const raytrace::Transform& to_world) -> std::optional<raytrace::Vec3> {
+    const auto hit = render::PlaceOnSurface(g, u, v, to_world, object_meshes);
+    if (!hit) return std::nullopt;
+    for (size_t i = 0; i < placement.size(); ++i) {
+      placement[i] = *hit;
+      renderer.SetObjectPlacement(static_cast<int>(i), *hit);
+    }
+    placed = true;
+    return hit->Apply(render::GroupCentre(object_meshes));
+  };
   render::VirtualGeometry with_virtual, head_geometry;
   render::DifferentialResult diff_result;
   double diff_ms_sum = 0, diff_changed_sum = 0;
@@ -245,27 +274,55 @@ int Run(int argc, char** argv) {
     if (real_depth.size() == camera_rgb.size() / 3) in.real_depth = real_depth;
     const bool have_gbuffer =
         real_depth.size() == camera_rgb.size() / 3 && real_normals.size() == 3 * real_depth.size();
-    if (!placed && have_gbuffer) {
-      // object_pixel: an ARKit-style hit test on the reconstruction (render/differential.h).
+    // Clicks of the frames shown so far (their pixels are the shown frames'; none offscreen).
+    if (backend == render::Backend::kWindow) {
+      for (const render::ViewerClick& c : renderer.TakeClicks()) pending_clicks.push_back(c);
+      if (!click_placement && !pending_clicks.empty()) {
+        if (!told_click_mode) {
+          node.Info() << "viewer click: placing objects by click needs mode scene (face mode's "
+                         "objects follow the head)";
+          told_click_mode = true;
+        }
+        pending_clicks.clear();
+      }
+      // Until G_r arrives keep only the newest few (the queue's bound).
+      if (pending_clicks.size() > render::ClickQueue::kCapacity) {
+        pending_clicks.erase(pending_clicks.begin(),
+                             pending_clicks.end() - render::ClickQueue::kCapacity);
+      }
+    }
+    if ((!placed || !pending_clicks.empty()) && have_gbuffer) {
+      // An ARKit-style hit test on the reconstruction (render/differential.h): object_pixel once,
+      // then each click in order.
       const light::Intrinsics k{in.camera.fx, in.camera.fy, in.camera.cx, in.camera.cy};
       const light::GeometryView g{width, height, k, real_depth, real_normals, {}};
-      std::vector<const raytrace::Mesh*> meshes;
-      for (const auto& o : content.objects) meshes.push_back(&o.mesh.mesh);
-      const auto hit =
-          render::PlaceOnSurface(g, object_pixel[0], object_pixel[1], in.camera_to_world, meshes);
-      if (hit) {
-        for (size_t i = 0; i < placement.size(); ++i) {
-          placement[i] = *hit;
-          renderer.SetObjectPlacement(static_cast<int>(i), *hit);
+      if (!placed) {
+        if (const auto at = place_at(g, object_pixel[0], object_pixel[1], in.camera_to_world)) {
+          node.Info() << "object_pixel [" << object_pixel[0] << ", " << object_pixel[1]
+                      << "]: objects moved by (" << placement[0].translation[0] << ", "
+                      << placement[0].translation[1] << ", " << placement[0].translation[2]
+                      << ") m, world frame";
+        } else if (!warned_hit) {
+          node.Warn() << "object_pixel: no reconstructed surface at that pixel yet";
+          warned_hit = true;
         }
-        node.Info() << "object_pixel [" << object_pixel[0] << ", " << object_pixel[1]
-                    << "]: objects moved by (" << hit->translation[0] << ", " << hit->translation[1]
-                    << ", " << hit->translation[2] << ") m, world frame";
-        placed = true;
-      } else if (!warned_hit) {
-        node.Warn() << "object_pixel: no reconstructed surface at that pixel yet";
-        warned_hit = true;
       }
+      for (const render::ViewerClick& c : pending_clicks) {
+        const int u = static_cast<int>(std::floor(c.u + 0.5));
+        const int v = static_cast<int>(std::floor(c.v + 0.5));
+        if (u >= width || v >= height) {  // the camera image shrank since that frame was shown
+          node.Warn() << "viewer click at pixel [" << u << ", " << v << "]: outside the current "
+                      << width << "x" << height << " image; the objects stay where they were";
+        } else if (const auto at = place_at(g, u, v, in.camera_to_world)) {
+          node.Info() << "viewer click at pixel [" << u << ", " << v
+                      << "]: objects rest on the surface there, centre at (" << at->x << ", "
+                      << at->y << ", " << at->z << ") m, world frame";
+        } else {
+          node.Warn() << "viewer click at pixel [" << u << ", " << v
+                      << "]: no reconstructed surface there; the objects stay where they were";
+        }
+      }
+      pending_clicks.clear();
     }
     // Gruber §5.4: G_r' -> R_d, R'_d (R_i, R'_i) -> eq. 13-15, from the reconstruction (scene
     // mode) or the head at its pose (face mode).
@@ -393,7 +450,7 @@ int Run(int argc, char** argv) {
   handlers.push_back({&gbuffer_sub, [&](bus::Sample&& s) {
                         const auto m = msgs::ReadMessage<msgs::GeometryBuffer>(s.data());
                         render::GeometryDepth(*m, m.payload, real_depth);
-                        if (differential || !placed) {
+                        if (differential || !placed || click_placement) {
                           render::GeometryPlanes(*m, m.payload, real_normals, real_colour);
                         }
                       }});
