@@ -357,11 +357,14 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
   std::optional<Clock::time_point> playing_since;
   const auto started = Clock::now();
   bool stopped = false;
+  bool stopped_by_stream = false;
   while (!launch.Poll()) {
     const int64_t now = MonotonicNs();
+    bool camera_publisher = false;
     for (const bus::TopicSnapshot& topic : bus::ListTopics(domain)) {
       for (const bus::PublisherSnapshot& p : topic.publishers) {
         if (!p.alive) continue;
+        if (topic.topic == "/camera/image") camera_publisher = true;
         Polled& proc = polled[p.pid];
         proc.node = p.node_name;
         proc.published[topic.topic] = std::max(proc.published[topic.topic], p.published);
@@ -385,7 +388,10 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
         proc.last_seen_ns = now;
       }
     }
-    if (!stopped && playing_since &&
+    // The stream has ended (the player is gone): the supervisor stops the graph itself, and a
+    // second SIGINT would make it escalate to SIGTERM before the nodes wrote their statistics.
+    if (playing_since && !camera_publisher && !stopped) stopped_by_stream = true;
+    if (!stopped && !stopped_by_stream && playing_since &&
         Clock::now() - *playing_since >= std::chrono::duration<double>(o.duration_s)) {
       launch.Signal(SIGINT);
       stopped = true;
@@ -393,7 +399,7 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
     // A graph that never starts playing or does not stop: SIGINT, then the supervisor's
     // escalation; our child alone is killed in the end (~Child).
     const auto overdue = std::chrono::duration<double>(o.delay_s + o.duration_s + 60.0);
-    if (Clock::now() - started >= overdue && !stopped) {
+    if (Clock::now() - started >= overdue && !stopped && !stopped_by_stream) {
       std::fprintf(stderr, "graph_bench: the graph did not end in time, stopping it\n");
       launch.Signal(SIGINT);
       stopped = true;
@@ -404,6 +410,7 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
   json run = {{"mode", lockstep ? "lockstep" : "live"},
               {"launch_exit_code", launch.exit_code()},
               {"stopped_after_duration", stopped},
+              {"stream_ended", stopped_by_stream},
               {"load_before", load_before},
               {"load_after", LoadAverage()}};
 

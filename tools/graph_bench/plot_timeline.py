@@ -51,7 +51,8 @@ def main():
         for topic, bars in spans.items():
             if topic not in topic_colour:
                 topic_colour[topic] = colours(len(topic_colour) % 10)
-            ax.broken_barh(bars, (row - 0.35, 0.7), facecolors=topic_colour[topic], label=topic)
+            ax.broken_barh(bars, (row - 0.35, 0.7), facecolors=topic_colour[topic],
+                          edgecolors="white", linewidth=0.3, label=topic)
     for c in camera:
         if t0 <= c <= t1:
             ax.axvline((c - t0) * 1e3, color="0.6", linewidth=0.6, zorder=0)
