@@ -26,6 +26,8 @@
 // and /proc. End-to-end latency, seen by a probe subscriber of this process (zero-copy, header
 // only): the player's publish of /camera/image with stamp S (the moment a camera would deliver
 // the frame) to the publish of /scene/light and /render/composite with stamp S (p50/p99/max).
+// Camera frames played: the most that the probe, the polls or a node's input counted; the player's
+// lateness against the source's timing (p50/p99) from its summary line in the launch log.
 // Prints a table, writes the JSON to FILE. Exit: 0; 2 on a bad option or a missing source; 1 if a
 // run fails.
 #include "probeless/node/main.h"
@@ -275,6 +277,12 @@ class Probe {
   };
   // Per topic of kTopics, after Stop().
   const std::vector<Seen>& seen(size_t topic) const { return seen_[topic]; }
+  // Messages the probe's queues lost (it shares the cores with the graph).
+  uint64_t dropped() const {
+    uint64_t n = 0;
+    for (const bus::Subscriber& s : subscribers_) n += s.dropped();
+    return n;
+  }
 
  private:
   void Loop() {
@@ -318,7 +326,8 @@ json Latencies(const Probe& probe) {
   out["camera_to_scene_light_ms"] = latency(1);
   out["camera_to_composite_ms"] = latency(2);
   const auto& images = probe.seen(0);
-  out["camera_frames"] = images.size();
+  out["probe_camera_frames"] = images.size();
+  out["probe_dropped"] = probe.dropped();
   out["scene_lights"] = probe.seen(1).size();
   out["composites"] = probe.seen(2).size();
   if (images.size() > 1) {
@@ -486,6 +495,38 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
   run["nodes"] = nodes;
   probe.Stop();
   run["latency"] = Latencies(probe);
+  // The camera frames played: the largest count anyone saw (the probe and the polls can each miss
+  // a few, a node that subscribed from the start none).
+  uint64_t camera_frames = probe.seen(0).size();
+  for (const auto& [name, n] : nodes.items()) {
+    if (n["outputs"].contains("/camera/image")) {
+      camera_frames = std::max(camera_frames, n["outputs"]["/camera/image"].get<uint64_t>());
+    }
+    if (n["inputs"].contains("/camera/image")) {
+      camera_frames =
+          std::max(camera_frames, n["inputs"]["/camera/image"]["received"].get<uint64_t>());
+    }
+  }
+  run["camera_frames"] = camera_frames;
+  // How late the player published against the source's timing (its summary line in the log).
+  {
+    std::ifstream log(dir / "launch.log");
+    std::string line;
+    while (std::getline(log, line)) {
+      const size_t at = line.find("lateness median ");
+      if (line.find("player: published") == std::string::npos || at == std::string::npos) continue;
+      double median_us = 0, p99_us = 0;
+      if (std::sscanf(line.c_str() + at, "lateness median %lf us, p99 %lf us", &median_us,
+                      &p99_us) == 2) {
+        run["player_lateness_ms"] = {{"p50", median_us * 1e-3}, {"p99", p99_us * 1e-3}};
+      }
+    }
+  }
+  for (auto& [name, n] : run["nodes"].items()) {
+    if (n.contains("process_frames") && camera_frames > 0) {
+      n["process_percent"] = 100.0 * n["process_frames"].get<double>() / camera_frames;
+    }
+  }
   if (timeline != nullptr) {
     (*timeline)["mode"] = run["mode"];
     (*timeline)["note"] =
@@ -501,7 +542,7 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
 // The rows of one run for the printed table.
 void PrintRun(const json& run) {
   const json& l = run["latency"];
-  const uint64_t frames = l.value("camera_frames", uint64_t{0});
+  const uint64_t frames = run.value("camera_frames", uint64_t{0});
   std::printf("%s run (exit %d, load %.2f -> %.2f): %llu camera frames in %.1f s\n",
               run["mode"].get<std::string>().c_str(), run["launch_exit_code"].get<int>(),
               run["load_before"][0].get<double>(), run["load_after"][0].get<double>(),
@@ -522,6 +563,11 @@ void PrintRun(const json& run) {
                 static_cast<unsigned long long>(n["process_dropped"].get<uint64_t>()),
                 frames > 0 ? 100.0 * handled / frames : 0.0, n["cpu_percent"].get<double>(),
                 n["process_ms"]["p50"].get<double>(), n["process_ms"]["p99"].get<double>());
+  }
+  if (run.contains("player_lateness_ms")) {
+    std::printf("  player lateness p50 %.1f ms, p99 %.1f ms\n",
+                run["player_lateness_ms"]["p50"].get<double>(),
+                run["player_lateness_ms"]["p99"].get<double>());
   }
   for (const char* key : {"camera_to_scene_light_ms", "camera_to_composite_ms"}) {
     if (!l.contains(key) || !l[key].contains("p50")) continue;
