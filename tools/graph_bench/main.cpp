@@ -1,7 +1,7 @@
 // graph_bench: the live scene graph measured as a whole (docs/benchmarks/graph.md, issue #24).
 //
-//   graph_bench [--source PATH] [--duration S] [--live | --lockstep] [--json FILE]
-//               [--timeline FILE] [--work DIR] [--delay S] [--arg NAME:=VALUE ...]
+//   graph_bench [--graph scene|face] [--source PATH] [--duration S] [--live | --lockstep]
+//               [--json FILE] [--timeline FILE] [--work DIR] [--delay S] [--arg NAME:=VALUE ...]
 //
 // Runs launch/replay.yaml with face:=false render:=true record:=true (player -> rectify -> fusion
 // -> scene_light -> renderer -> recorder) on a 7-Scenes log, in its own bus domain, once
@@ -9,6 +9,9 @@
 // ("lockstep": every frame through every node, as fast as they go: the ceiling), each for
 // --duration seconds of playing (default 10: the 300 shared frames; the graph ends earlier with the
 // stream).
+//   --graph     scene (above, the default) or face: face:=true scene:=false (player -> rectify ->
+//               face_tracker -> face_light -> renderer in face mode -> recorder) on the synthetic
+//               world's face_orbit scenario (120 frames, rendered once to <work>/face.mcap)
 //   --source    a 7-Scenes folder (converted once to <work>/source.mcap by the library behind
 //               `probeless bag convert`) or an MCAP log; default $PROBELESS_DATA/7scenes-redkitchen
 //               (else the shared data folder beside the source tree)
@@ -25,7 +28,8 @@
 // ($PROBELESS_NODE_STATS, node.h) or, for player and recorder, the bus registry polled every 50 ms
 // and /proc. End-to-end latency, seen by a probe subscriber of this process (zero-copy, header
 // only): the player's publish of /camera/image with stamp S (the moment a camera would deliver
-// the frame) to the publish of /scene/light and /render/composite with stamp S (p50/p99/max).
+// the frame) to the publish of /scene/light (face graph: /face/light) and /render/composite with
+// stamp S (p50/p99/max).
 // Camera frames played: the most that the probe, the polls or a node's input counted; the player's
 // lateness against the source's timing (p50/p99) from its summary line in the launch log.
 // Prints a table, writes the JSON to FILE. Exit: 0; 2 on a bad option or a missing source; 1 if a
@@ -80,6 +84,7 @@ constexpr char kUsage[] =
     "(docs/benchmarks/graph.md).\n";
 
 struct Options {
+  bool face = false;  // --graph face
   std::string source;
   double duration_s = 10.0;
   bool live = true;
@@ -103,6 +108,12 @@ Options ParseOptions(int argc, char** argv) {
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       std::exit(0);
+    } else if (a == "--graph") {
+      const std::string graph = value();
+      if (graph != "scene" && graph != "face") {
+        throw node::UsageError("--graph expects scene or face, got '" + graph + "'");
+      }
+      o.face = graph == "face";
     } else if (a == "--source") {
       o.source = value();
     } else if (a == "--duration") {
@@ -135,13 +146,15 @@ Options ParseOptions(int argc, char** argv) {
     throw node::UsageError("--live and --lockstep exclude each other");
   if (only_live) o.lockstep = false;
   if (only_lockstep) o.live = false;
-  if (o.source.empty()) {
+  if (o.source.empty() && o.face) {
+    o.source = "sim:" + std::string(PROBELESS_SOURCE_DIR) + "/data/scenarios/face_orbit.yaml";
+  } else if (o.source.empty()) {
     const char* env = std::getenv("PROBELESS_DATA");
     o.source =
         (fs::path(env != nullptr && *env != '\0' ? env : PROBELESS_DATA_DIR) / "7scenes-redkitchen")
             .string();
   }
-  if (!fs::exists(o.source)) {
+  if (!fs::exists(o.source.starts_with("sim:") ? o.source.substr(4) : o.source)) {
     throw node::UsageError("--source '" + o.source +
                            "' not found (set PROBELESS_DATA to the shared data folder)");
   }
@@ -256,14 +269,14 @@ fs::path ExeDir() { return fs::read_symlink("/proc/self/exe").parent_path(); }
 // the latencies depend neither on the recorder's discovery nor on its drops.
 class Probe {
  public:
-  static constexpr const char* kTopics[] = {"/camera/image", "/scene/light", "/render/composite"};
-  Probe() {
+  // /camera/image, the light (/scene/light or /face/light), /render/composite.
+  explicit Probe(const std::string& light_topic) {
     bus::SubscriberOptions options;
     options.queue_depth = 64;
     options.node_name = "/graph_bench_probe";
-    subscribers_.emplace_back(kTopics[0], msgs::TopicTypeOf<msgs::Image>(), options);
-    subscribers_.emplace_back(kTopics[1], msgs::TopicTypeOf<msgs::ShLight>(), options);
-    subscribers_.emplace_back(kTopics[2], msgs::TopicTypeOf<msgs::Image>(), options);
+    subscribers_.emplace_back("/camera/image", msgs::TopicTypeOf<msgs::Image>(), options);
+    subscribers_.emplace_back(light_topic, msgs::TopicTypeOf<msgs::ShLight>(), options);
+    subscribers_.emplace_back("/render/composite", msgs::TopicTypeOf<msgs::Image>(), options);
     for (bus::Subscriber& s : subscribers_) wait_set_.Add(s);
     thread_ = std::thread([this] { Loop(); });
   }
@@ -275,7 +288,7 @@ class Probe {
   struct Seen {
     int64_t stamp_ns, publish_wall_ns, publish_mono_ns;
   };
-  // Per topic of kTopics, after Stop().
+  // Per topic (the order above), after Stop().
   const std::vector<Seen>& seen(size_t topic) const { return seen_[topic]; }
   // Messages the probe's queues lost (it shares the cores with the graph).
   uint64_t dropped() const {
@@ -304,7 +317,7 @@ class Probe {
 };
 
 // Camera -> /scene/light and -> /render/composite latencies, matched by header stamp.
-json Latencies(const Probe& probe) {
+json Latencies(const Probe& probe, bool face) {
   std::map<int64_t, int64_t> camera;  // stamp -> the player's publish of /camera/image
   for (const Probe::Seen& s : probe.seen(0)) camera.emplace(s.stamp_ns, s.publish_wall_ns);
   auto latency = [&](size_t topic) {
@@ -323,12 +336,12 @@ json Latencies(const Probe& probe) {
     return j;
   };
   json out;
-  out["camera_to_scene_light_ms"] = latency(1);
+  out[face ? "camera_to_face_light_ms" : "camera_to_scene_light_ms"] = latency(1);
   out["camera_to_composite_ms"] = latency(2);
   const auto& images = probe.seen(0);
   out["probe_camera_frames"] = images.size();
   out["probe_dropped"] = probe.dropped();
-  out["scene_lights"] = probe.seen(1).size();
+  out[face ? "face_lights" : "scene_lights"] = probe.seen(1).size();
   out["composites"] = probe.seen(2).size();
   if (images.size() > 1) {
     out["played_s"] = (images.back().publish_wall_ns - images.front().publish_wall_ns) * 1e-9;
@@ -350,8 +363,8 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
                                    "launch",
                                    std::string(PROBELESS_SOURCE_DIR) + "/launch/replay.yaml",
                                    "source:=" + mcap.string(),
-                                   "face:=false",
-                                   "scene:=true",
+                                   std::string("face:=") + (o.face ? "true" : "false"),
+                                   std::string("scene:=") + (o.face ? "false" : "true"),
                                    "render:=true",
                                    "record:=true",
                                    "out:=" + out_dir.string(),
@@ -360,7 +373,8 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
   args.insert(args.end(), o.launch_args.begin(), o.launch_args.end());
   const std::string domain = bus::CurrentDomain();
   const json load_before = LoadAverage();
-  Probe probe;
+  const double own_cpu_at_start = CpuSeconds(getpid()).value_or(0.0);
+  Probe probe(o.face ? "/face/light" : "/scene/light");
   Child launch(args, (dir / "launch.log").string());
   std::map<pid_t, Polled> polled;
   std::optional<Clock::time_point> playing_since;
@@ -392,7 +406,8 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
     }
     for (auto& [pid, proc] : polled) {
       if (const auto cpu = CpuSeconds(pid)) {
-        proc.cpu_s = *cpu;
+        // This process (the probe) counts from the run's start, not from the conversion.
+        proc.cpu_s = pid == getpid() ? *cpu - own_cpu_at_start : *cpu;
         if (proc.first_seen_ns == 0) proc.first_seen_ns = now;
         proc.last_seen_ns = now;
       }
@@ -494,7 +509,7 @@ json RunGraph(const Options& o, const fs::path& mcap, const fs::path& dir, bool 
   }
   run["nodes"] = nodes;
   probe.Stop();
-  run["latency"] = Latencies(probe);
+  run["latency"] = Latencies(probe, o.face);
   // The camera frames played: the largest count anyone saw (the probe and the polls can each miss
   // a few, a node that subscribed from the start none).
   uint64_t camera_frames = probe.seen(0).size();
@@ -569,7 +584,8 @@ void PrintRun(const json& run) {
                 run["player_lateness_ms"]["p50"].get<double>(),
                 run["player_lateness_ms"]["p99"].get<double>());
   }
-  for (const char* key : {"camera_to_scene_light_ms", "camera_to_composite_ms"}) {
+  for (const char* key :
+       {"camera_to_scene_light_ms", "camera_to_face_light_ms", "camera_to_composite_ms"}) {
     if (!l.contains(key) || !l[key].contains("p50")) continue;
     std::printf("  %-26s n=%llu p50 %.1f ms, p99 %.1f ms\n", key,
                 static_cast<unsigned long long>(l[key]["count"].get<uint64_t>()),
@@ -590,8 +606,8 @@ int Run(int argc, char** argv) {
 
   fs::path mcap = o.source;
   uint64_t source_frames = 0;
-  if (fs::is_directory(o.source)) {
-    mcap = work / "source.mcap";
+  if (fs::is_directory(o.source) || o.source.starts_with("sim:")) {
+    mcap = work / (o.face ? "face.mcap" : "source.mcap");
     auto source = replay::OpenSource(o.source);
     for (const auto& t : source->topics()) {
       if (t.topic == "/camera/image") source_frames = t.message_count;
@@ -609,14 +625,16 @@ int Run(int argc, char** argv) {
     }
   }
 
-  json result = {{"tool", "graph_bench"},
-                 {"graph", "launch/replay.yaml face:=false render:=true record:=true"},
-                 {"source", o.source},
-                 {"source_camera_frames", source_frames},
-                 {"duration_s", o.duration_s},
-                 {"delay_s", o.delay_s},
-                 {"launch_args", o.launch_args},
-                 {"cores", std::thread::hardware_concurrency()}};
+  json result = {
+      {"tool", "graph_bench"},
+      {"graph", o.face ? "launch/replay.yaml face:=true scene:=false render:=true record:=true"
+                       : "launch/replay.yaml face:=false render:=true record:=true"},
+      {"source", o.source},
+      {"source_camera_frames", source_frames},
+      {"duration_s", o.duration_s},
+      {"delay_s", o.delay_s},
+      {"launch_args", o.launch_args},
+      {"cores", std::thread::hardware_concurrency()}};
   json timeline;
   json runs = json::object();
   int code = 0;
