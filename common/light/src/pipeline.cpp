@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "albedo_groups.h"
 #include "probeless/light/fusion.h"
 
 namespace probeless::light {
@@ -130,6 +131,7 @@ struct ScenePipeline::State {
   std::vector<float> depth, normals, reliability;   // the fit's geometry
   std::vector<float> row_weights;                   // reliability x focus weights
   std::vector<float> shadow_depth, shadow_normals;  // the shadow search's depth image
+  std::vector<uint8_t> group_colour;                // colour of the groups (fill_clipped_chroma)
   TransferResult transfer;
   ScenePipelineResult result;
 };
@@ -310,6 +312,14 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     }
   }
 
+  // The colour the albedo and shadow groups read.
+  std::span<const uint8_t> colour = f.colour;
+  if (o.fill_clipped_chroma && f.colour.size() == 3 * pixels) {
+    s.group_colour = internal::FillClippedChroma(f.colour, view.depth, view.normals, w, h, 254,
+                                                 0.03f, 30.0f, &r.clipped_filled);
+    colour = s.group_colour;
+  }
+
   // The light prior's up direction, from the fit's geometry.
   EstimateOptions estimate = o.estimate;
   r.up = {};
@@ -331,16 +341,14 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
     if (o.shadows_override_prior && prior_on) {
       EstimateOptions no_prior = estimate;
       no_prior.prior.weight = 0;
-      free_fit = EstimateLight(s.transfer, f.grey, no_prior, f.colour, weights);
+      free_fit = EstimateLight(s.transfer, f.grey, no_prior, colour, weights);
     }
     if (free_fit && free_fit->valid) {
       LightEstimate seed = *free_fit;  // a copy: the evidence below reads the unrotated fit
-      r.shadow =
-          RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, &seed);
+      r.shadow = RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, colour, &seed);
       if (r.shadow.valid) *light = std::move(seed);
     } else {
-      r.shadow =
-          RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, f.colour, light);
+      r.shadow = RefineLightWithShadows(r.shadow_geometry, f.grey, r.shadow_options, colour, light);
     }
     r.timings.cpu_ms_shadow = ProcessCpuMs() - cpu0;
     r.shadow_ran = r.shadow.evaluations > 0;
@@ -360,15 +368,15 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
         }
       }
     }
-    r.light = s.temporal.Estimate(s.transfer, f.grey, estimate, f.colour,
+    r.light = s.temporal.Estimate(s.transfer, f.grey, estimate, colour,
                                   rotated ? rotation : nullptr, weights);
     r.distant = r.light;
   } else if (o.light_model == LightModel::kDistant) {
-    r.light = EstimateLight(s.transfer, f.grey, estimate, f.colour, weights);
+    r.light = EstimateLight(s.transfer, f.grey, estimate, colour, weights);
     r.distant = r.light;
     if (shadows && r.light.valid) shadow_search(&r.light);
   } else {
-    SceneLightResult scene = EstimateSceneLight(view, s.transfer, f.grey, s.scene, f.colour,
+    SceneLightResult scene = EstimateSceneLight(view, s.transfer, f.grey, s.scene, colour,
                                                 o.point_warm_start ? &s.tracker : nullptr, weights);
     r.used = scene.used;
     r.distant = std::move(scene.distant);

@@ -129,6 +129,11 @@ struct ScenePipelineOptions {
   // mean linear colour of the fit's pixels is the illuminant's): ScenePipelineResult::colour.
   // false: white.
   bool grey_world_colour = true;
+  // Clipped pixels (a channel at 254 or 255: the sunlit table that reads white) take the
+  // chromaticity of the nearest unclipped pixel on the same surface before the albedo and shadow
+  // groups are formed, so that the lit and shadowed parts of one material share a group (the
+  // lit part is the evidence of the light). false: they form groups of their own.
+  bool fill_clipped_chroma = false;
 
   // The published confidence on msgs::ShLight's scale (light/fusion.h: c = 1 / (1 + (e / 10
   // deg)^2), e the expected dominant-direction error): knots (fit confidence, median direction
@@ -243,6 +248,8 @@ struct ScenePipelineResult {
   // Per-channel factors (R, G, B; mean 1) for the white light's coefficients: the illuminant
   // colour (ScenePipelineOptions::grey_world_colour), {1, 1, 1} without a colour image.
   std::array<float, 3> colour{1, 1, 1};
+  // Clipped pixels given their surface's chromaticity (fill_clipped_chroma), 0 when off.
+  size_t clipped_filled = 0;
   // The up direction of the light prior (valid false: no prior this frame or none asked for).
   UpDirection up;
   SceneEvidence evidence;
