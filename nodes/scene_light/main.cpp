@@ -23,7 +23,8 @@
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
 //   seed (1), threads (2), albedo (0.25), stride (4), robust (true), non_negative (false),
 //   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
-//   0 = one uniform albedo), max_rows_per_bin (100),
+//   0 = one uniform albedo), max_rows_per_bin (100), max_intensity (0.98: brighter pixels are left
+//   out of the fit), fill_clipped_chroma (false: ScenePipelineOptions::fill_clipped_chroma),
 //   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true),
 //   gbuffer_normals ("fusion": G_r's normals; "depth": recomputed from G_r's depth, step
 //   max(2, w / 160)), normal_filter (false: light::FilterNormals on the normals), temporal_frames
@@ -37,9 +38,10 @@
 //   light::NormalsWithReliability; "central": SmoothDepth w / 80 + NormalsFromDepth), smooth_radius
 //   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
 //   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r),
-//   shadows (true with subsample 1: the distant light's direction refined by cast shadows,
+//   shadows (false; true: the distant light's direction refined by cast shadows,
 //   light::RefineLightWithShadows; not with temporal_frames > 1), shadow_image_cues (true in depth
 //   mode: ShadowOptions::image_cues, light::RawDepthShadowOptions), shadow_stride (8),
+//   shadow_min_contrast (2: ShadowOptions::min_contrast),
 //   shadows_override_prior (true: an accepted shadow direction overrides the light prior,
 //   light::ScenePipelineOptions::shadows_override_prior), confidence_calibration (knots: fit
 //   confidence, expected error in degrees; default light::DefaultSceneConfidenceKnots of the mode),
@@ -96,6 +98,7 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   eo.direction_bands = node.Param("direction_bands", 2);
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
+  eo.max_intensity = static_cast<float>(node.Param("max_intensity", double{eo.max_intensity}));
   // The light prior (light::LightPrior; chosen on the evaluation world's train / validation
   // splits, docs/light.md "Light prior").
   eo.prior.weight = node.Param("prior_weight", static_cast<double>(eo.prior.weight));
@@ -103,6 +106,7 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
                     static_cast<float>(node.Param("prior_z2", double{eo.prior.zonal[2]})),
                     static_cast<float>(node.Param("prior_z3", double{eo.prior.zonal[3]}))};
   po.grey_world_colour = node.Param("grey_world_colour", true);
+  po.fill_clipped_chroma = node.Param("fill_clipped_chroma", po.fill_clipped_chroma);
   po.focus.radius_m = static_cast<float>(node.Param("focus_radius", double{po.focus.radius_m}));
   po.focus.floor = static_cast<float>(node.Param("focus_floor", double{po.focus.floor}));
   po.uncertainty_blur =
@@ -138,18 +142,20 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.temporal.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
   po.light_model = light::ParseLightModel(node.Param("light_model", "auto"));  // LightError if bad
   po.point.max_lamps = node.Param("lamps", 1);
-  // Cast shadows: on by default for the full variant (fused courtyard_sun 36.8 -> 7.6 deg), off for
-  // OursFast (the search's ~10 ms wall would break its 15 ms budget). On raw sensor depth (depth
-  // mode) only with the image cues (shadow_image_cues, default on in depth mode): without them
-  // quantised depth lets a wrong occluder explain a shadow (12 consecutive courtyard frames:
-  // 22.5 -> 43.6 deg; with them 6.5 deg); docs/light.md "Cast shadows".
-  po.shadow.enabled = node.Param("shadows", to.subsample == 1);
+  // Cast shadows: off by default, because in the evaluation world's rooms (validation split) the
+  // directions the search accepts are wrong more often than right; on for scenes under a clear sun
+  // with their occluders in view. On raw sensor depth (depth mode) only with the image cues
+  // (shadow_image_cues, default on in depth mode): without them quantised depth lets a wrong
+  // occluder explain a shadow. docs/light.md "Cast shadows", "Where it runs".
+  po.shadow.enabled = node.Param("shadows", false);
   const bool image_cues = node.Param("shadow_image_cues", mode == "depth");
   // gbuffer mode: the param is the search's on G_r; on the frame's depth image the cues are on
   // (light::RawDepthShadowOptions). depth mode: the search's on the depth image.
   po.shadow.image_cues = mode == "gbuffer" && image_cues;
   po.depth_image_cues = mode == "gbuffer" || image_cues;
   po.shadow.stride = node.Param("shadow_stride", 8);
+  po.shadow.min_contrast =
+      static_cast<float>(node.Param("shadow_min_contrast", double{po.shadow.min_contrast}));
   po.shadows_override_prior = node.Param("shadows_override_prior", true);
   // The published confidence on the ShLight scale (light::ScenePipelineOptions::confidence_knots);
   // raw_confidence publishes the fit's own (the input of tools/light_prior/fit_confidence.py).
@@ -157,6 +163,15 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
       node.Param("confidence_calibration", light::DefaultSceneConfidenceKnots(po.source));
   if (node.Param("raw_confidence", false)) po.confidence_knots->clear();
   po.shadow.threads = to.threads;
+  if (!(eo.max_intensity > eo.min_intensity)) {
+    throw node::UsageError("scene_light: max_intensity must be above " +
+                           std::to_string(eo.min_intensity) + " (linear grey), got " +
+                           std::to_string(eo.max_intensity));
+  }
+  if (!(po.shadow.min_contrast >= 1)) {
+    throw node::UsageError("scene_light: shadow_min_contrast must be >= 1 (a ratio), got " +
+                           std::to_string(po.shadow.min_contrast));
+  }
   if (po.shadow.stride < 1) {
     throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +
                            std::to_string(po.shadow.stride));
@@ -462,7 +477,8 @@ int Run(int argc, char** argv) {
                    << (sh.valid ? "accepted" : "rejected") << ", score " << sh.score
                    << " (unshadowed " << sh.score_unshadowed << ", runner-up " << sh.runner_up
                    << "), contrast " << sh.contrast << ", " << sh.groups << " groups, direction ("
-                   << sh.direction[0] << ", " << sh.direction[1] << ", " << sh.direction[2] << ")";
+                   << sh.direction[0] << ", " << sh.direction[1] << ", " << sh.direction[2] << "), "
+                   << r.clipped_filled << " clipped pixels given their surface's colour";
     }
     ++frames;
     if (e.valid) {

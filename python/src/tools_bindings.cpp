@@ -388,7 +388,7 @@ light::ScenePipelineOptions SceneOptions(const std::string& mode, int bands, int
   po.depth_geometry.step = -1;
   po.light_model = light::ParseLightModel(model);
   po.point.max_lamps = 1;
-  po.shadow.enabled = shadows.value_or(subsample == 1);
+  po.shadow.enabled = shadows.value_or(false);
   const bool image_cues = mode == "depth";
   po.shadow.image_cues = mode == "gbuffer" && image_cues;
   po.depth_image_cues = mode == "gbuffer" || image_cues;
@@ -441,7 +441,7 @@ void BindSceneLight(py::module_& m) {
            py::arg("shadows") = py::none(), py::arg("light_model") = "auto",
            py::arg("raw_confidence") = false,
            "Options named and defaulted as the node's params (docs/nodes.md, scene_light); "
-           "shadows None = on for subsample 1. Raises LightError for bad options.")
+           "shadows None = off (the node's default). Raises LightError for bad options.")
       .def(
           "process",
           [](PyScene& self, py::array_t<uint8_t, py::array::c_style | py::array::forcecast> image,

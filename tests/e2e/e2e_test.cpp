@@ -434,10 +434,11 @@ TEST_F(EndToEnd, CourtyardSunThroughTheWholeGraphInLockStep) {
   ASSERT_TRUE(fs::exists(source));
   testing::TempDir dir("e2e_scene");
   // fusion sized for the courtyard (as launch/demo_scene.yaml); scene_light on the sensor depth
-  // (see the bound below); the renderer's sphere on the table lit by /scene/light.
+  // with the cast-shadow search of a clear sun (see the bound below); the renderer's sphere on the
+  // table lit by /scene/light.
   GraphRun run = RunGraph(source, dir.path(), "/scene/light",
                           "volume_size:=6.0 'volume_origin:=[-3.0, -3.0, 0.3]' truncation:=0.08 "
-                          "depth_max:=6.0 scene_light_mode:=depth mode:=scene "
+                          "depth_max:=6.0 scene_light_mode:=depth shadows:=true mode:=scene "
                           "'objects:=[nose]' object_scale:=5.0 "
                           "'object_position:=[0.151, 0.107, 3.178]'");
   ASSERT_EQ(run.launch.code, 0) << run.launch.err;

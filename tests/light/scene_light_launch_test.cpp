@@ -175,6 +175,16 @@ TEST(SceneLightLaunch, BadModeIsAOneLineError) {
   EXPECT_TRUE(WIFEXITED(status3) && WEXITSTATUS(status3) == 2);
   EXPECT_EQ(log3,
             "[error] [scene_light] scene_light: shadow_depth must be raw or gbuffer, got 'tsdf'\n");
+  const auto [status4, log4] = RunSceneLight("-p max_intensity:=0.001");
+  EXPECT_TRUE(WIFEXITED(status4) && WEXITSTATUS(status4) == 2);
+  EXPECT_EQ(log4,
+            "[error] [scene_light] scene_light: max_intensity must be above 0.004000 (linear "
+            "grey), got 0.001000\n");
+  const auto [status5, log5] = RunSceneLight("-p shadow_min_contrast:=0.5");
+  EXPECT_TRUE(WIFEXITED(status5) && WEXITSTATUS(status5) == 2);
+  EXPECT_EQ(log5,
+            "[error] [scene_light] scene_light: shadow_min_contrast must be >= 1 (a ratio), got "
+            "0.500000\n");
 }
 
 std::string ReadFile(const std::string& path) {
@@ -250,7 +260,8 @@ TEST(SceneLightLaunch, FusionAuxiliaryViewsReachSceneLight) {
   std::map<int64_t, AuxInfo> aux;
   std::set<int64_t> light_stamps;
   std::string log;
-  RunAuxLaunch("", &aux, &light_stamps, &log);
+  // The courtyard's clear sun: the shadow search on (its geometry is checked below).
+  RunAuxLaunch("shadows:=true", &aux, &light_stamps, &log);
   EXPECT_EQ(light_stamps.size(), 3u) << log;
   ASSERT_EQ(aux.size(), 3u) << log;
   for (const auto& [stamp, a] : aux) {
