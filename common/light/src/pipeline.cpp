@@ -95,11 +95,11 @@ void Validate(const ScenePipelineOptions& o) {
 }  // namespace
 
 std::vector<double> DefaultSceneConfidenceKnots(SceneGeometrySource source) {
-  // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md).
+  // tools/light_prior/fit_confidence.py on the validation split (docs/light.md "Confidence").
   if (source == SceneGeometrySource::kDepthImage) {
-    return {0.002, 66.2, 0.225, 44.9, 0.408, 41.8, 0.846, 30.9};
+    return {0.000, 66.3, 0.127, 45.4, 0.334, 44.4, 0.745, 24.8};
   }
-  return {0.002, 61.8, 0.143, 44.3, 0.390, 35.5};
+  return {0.074, 65.8, 0.214, 44.4, 0.310, 44.3, 0.702, 25.7};
 }
 
 struct ScenePipeline::State {
