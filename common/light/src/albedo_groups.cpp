@@ -129,15 +129,16 @@ std::vector<uint8_t> FillClippedChroma(std::span<const uint8_t> colour,
     }
     return true;
   };
+  bool moved = false;
   auto relax = [&](size_t i, size_t j) {
     if (distance[j] != kFar && distance[j] + 1 < distance[i] && joined(i, j)) {
-      distance[i] = distance[j] + 1, source[i] = source[j];
+      distance[i] = distance[j] + 1, source[i] = source[j], moved = true;
     }
   };
   // Raster sweeps (forward: left and up neighbours; backward: right and down) until nothing
   // changes, at most 4 rounds: enough for the convex patches clipping makes.
   for (int round = 0; round < 4; ++round) {
-    const std::vector<int> before = distance;
+    moved = false;
     for (int y = 0; y < height; ++y) {
       for (int x = 0; x < width; ++x) {
         const size_t i = static_cast<size_t>(y) * width + x;
@@ -154,7 +155,7 @@ std::vector<uint8_t> FillClippedChroma(std::span<const uint8_t> colour,
         if (y + 1 < height) relax(i, i + width);
       }
     }
-    if (distance == before) break;
+    if (!moved) break;
   }
   std::array<float, 256> lut;
   for (int v = 0; v < 256; ++v) lut[v] = SrgbToLinear(static_cast<uint8_t>(v));
