@@ -20,6 +20,8 @@
 #include <thread>
 #include <vector>
 
+#include "probeless/launch/proc_stat.h"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -37,13 +39,8 @@ double SecondsSince(Clock::time_point start) {
 
 // True while `pid` exists and is not a zombie.
 bool ProcessAlive(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string stat;
-  if (!std::getline(in, stat)) return false;
-  const size_t close = stat.rfind(')');
-  if (close == std::string::npos || close + 2 >= stat.size()) return false;
-  const char state = stat[close + 2];
-  return state != 'Z' && state != 'X';
+  const std::optional<probeless::launch::ProcStat> stat = probeless::launch::ReadProcStat(pid);
+  return stat && stat->Alive();
 }
 
 bool WaitUntilGone(pid_t pid, double timeout_s) {

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "probeless/bus/bus.h"
+#include "probeless/launch/proc_stat.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/testing/testing.h"
 
@@ -87,17 +88,9 @@ class ReplayIntegrationTest : public ::testing::Test {
     // While it waits for its topics to appear, an idle recorder uses (almost) no CPU.
     std::this_thread::sleep_for(1s);
     auto cpu_seconds = [](pid_t pid) {
-      std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-      std::string stat((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-      std::istringstream fields(stat.substr(stat.rfind(')') + 2));
-      std::string field;
-      uint64_t utime = 0;
-      uint64_t stime = 0;
-      for (int i = 3; i <= 15 && fields >> field; ++i) {
-        if (i == 14) utime = std::stoull(field);
-        if (i == 15) stime = std::stoull(field);
-      }
-      return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+      const std::optional<probeless::launch::ProcStat> stat = probeless::launch::ReadProcStat(pid);
+      EXPECT_TRUE(stat.has_value()) << "the recorder (pid " << pid << ") is gone";
+      return stat ? stat->CpuSeconds() : 0.0;
     };
     const double idle_cpu = cpu_seconds(recorder);
     std::this_thread::sleep_for(1s);

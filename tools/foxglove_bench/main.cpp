@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "probeless/bus/bus.h"
+#include "probeless/launch/proc_stat.h"
 #include "probeless/msgs/msgs.h"
 #include "raw_ws_client.h"
 
@@ -54,18 +55,11 @@ int64_t RealtimeNs() {
   return int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
 }
 
-// CPU seconds (user + system) of process `pid` so far.
+// CPU seconds (user + system) of process `pid` so far; the bridge must still run.
 double CpuSeconds(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
-  std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  std::istringstream rest(text.substr(text.rfind(')') + 2));
-  std::string field;
-  unsigned long long utime = 0, stime = 0;
-  for (int i = 3; i <= 15 && rest >> field; ++i) {
-    if (i == 14) utime = std::stoull(field);
-    if (i == 15) stime = std::stoull(field);
-  }
-  return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  const std::optional<probeless::launch::ProcStat> stat = probeless::launch::ReadProcStat(pid);
+  if (!stat) throw std::runtime_error("the bridge (pid " + std::to_string(pid) + ") is gone");
+  return stat->CpuSeconds();
 }
 
 // The bridge as a child process; its stderr goes to a file, read for the port.

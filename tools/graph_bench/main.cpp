@@ -61,6 +61,7 @@
 #include <vector>
 
 #include "probeless/bus/bus.h"
+#include "probeless/launch/proc_stat.h"
 #include "probeless/log/mcap.h"
 #include "probeless/log/mcap_writer.h"
 #include "probeless/msgs/msgs.h"
@@ -169,19 +170,9 @@ int64_t MonotonicNs() {
 
 // CPU seconds (user + system, all threads) of process `pid`, or nullopt once it is gone.
 std::optional<double> CpuSeconds(pid_t pid) {
-  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
-  if (!f) return std::nullopt;
-  const std::string text((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-  const size_t close = text.rfind(')');
-  if (close == std::string::npos) return std::nullopt;
-  std::istringstream rest(text.substr(close + 2));
-  std::string field;
-  unsigned long long utime = 0, stime = 0;
-  for (int i = 3; i <= 15 && rest >> field; ++i) {
-    if (i == 14) utime = std::stoull(field);
-    if (i == 15) stime = std::stoull(field);
-  }
-  return static_cast<double>(utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  const std::optional<probeless::launch::ProcStat> stat = probeless::launch::ReadProcStat(pid);
+  if (!stat) return std::nullopt;
+  return stat->CpuSeconds();
 }
 
 std::vector<double> LoadAverage() {

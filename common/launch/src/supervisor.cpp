@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "probeless/error/error.h"
+#include "probeless/launch/proc_stat.h"
 
 extern char** environ;
 
@@ -98,19 +99,9 @@ std::vector<ProcInfo> ReadProcessTable() {
   if (dir == nullptr) return table;
   while (dirent* entry = ::readdir(dir)) {
     if (!std::isdigit(static_cast<unsigned char>(entry->d_name[0]))) continue;
-    std::ifstream in(std::string("/proc/") + entry->d_name + "/stat");
-    std::string stat;
-    if (!std::getline(in, stat)) continue;
-    // "pid (comm) state ppid pgrp ..."; comm may contain spaces and ')'.
-    const size_t close = stat.rfind(')');
-    if (close == stat.npos) continue;
-    std::istringstream fields(stat.substr(close + 1));
-    char state = 0;
-    ProcInfo info;
-    info.pid = std::atoi(entry->d_name);
-    if (!(fields >> state >> info.ppid >> info.pgid)) continue;
-    if (state == 'Z' || state == 'X') continue;
-    table.push_back(info);
+    const std::optional<ProcStat> stat = ReadProcStat(std::atoi(entry->d_name));
+    if (!stat || !stat->Alive()) continue;  // gone since readdir, or a zombie
+    table.push_back({stat->pid, stat->ppid, stat->pgid});
   }
   ::closedir(dir);
   return table;
