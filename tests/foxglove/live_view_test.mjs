@@ -195,12 +195,29 @@ async function main() {
   check(s?.connected && s.frames >= 5 && s.lights >= 5 && !s.error,
         `the page connected and drew ${s?.frames} composites and ${s?.lights} lights (${s?.error || "no error"})`);
 
-  // Freeze the stream, then photograph the page.
+  // Freeze the stream, then photograph the page once it has drawn its last message: under load the
+  // bridge and the page may still hold frames for a while after the player stops.
   await stop(player);
-  await sleep(700);
+  const settled = async () => {
+    const seen = JSON.stringify([s?.frames, s?.lights]);
+    await sleep(1000);
+    s = await state();
+    return JSON.stringify([s?.frames, s?.lights]) === seen;
+  };
   s = await state();
-  const shot = await send("Page.captureScreenshot", { format: "png" }, sessionId);
-  const png = decodePng(Buffer.from(shot.data, "base64"));
+  check(await waitFor(settled, 20000), `the page stopped drawing (${s?.frames} composites, ${s?.lights} lights)`);
+  let png;
+  for (let attempt = 0; ; attempt++) {
+    const before = JSON.stringify(s);
+    const shot = await send("Page.captureScreenshot", { format: "png" }, sessionId);
+    png = decodePng(Buffer.from(shot.data, "base64"));
+    s = await state();
+    if (JSON.stringify(s) === before) break;  // nothing was drawn during the screenshot
+    if (attempt === 2) {
+      check(false, "the page kept drawing during 3 screenshots in a row");
+      break;
+    }
+  }
   check(png.width === 1000 && png.height === 700, `screenshot ${png.width}x${png.height}`);
 
   const image = images.get(s.stamp);
