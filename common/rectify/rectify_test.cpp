@@ -19,8 +19,8 @@
 namespace probeless::rectify {
 namespace {
 
-using probeless::testing::ErrorOf;
 using probeless::testing::TempDir;
+using probeless::testing::ThrownMessage;
 
 msgs::CameraInfo RationalInfo() {
   msgs::CameraInfo info = test::Freiburg1Info();
@@ -325,7 +325,9 @@ TEST(Rectify, MalformedCalibrationsNameTheirSource) {
                                 "  cols: 3\n  data: [517.3, 0, 318.6, 0, 516.5, 255.3, 0, 0, 1]\n"
                                 "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n"
                                 "  cols: 6\n  data: [0.26, -0.95, 0, 0, 1.16, 0.1]\n");
-  EXPECT_NE(ErrorOf([&] { calib::ReadCalibrationFile(six); }).find("'" + six + "'"),
+  EXPECT_NE(ThrownMessage<calib::CalibrationError>([&] {
+              calib::ReadCalibrationFile(six);
+            }).find("'" + six + "'"),
             std::string::npos);
   const std::string nan = dir.File("nan.yaml");
   probeless::testing::WriteText(nan,
@@ -333,7 +335,7 @@ TEST(Rectify, MalformedCalibrationsNameTheirSource) {
                                 "  cols: 3\n  data: [517.3, 0, 318.6, 0, 516.5, 255.3, 0, 0, 1]\n"
                                 "distortion_model: plumb_bob\ndistortion_coefficients:\n  rows: 1\n"
                                 "  cols: 5\n  data: [0.26, .nan, 0, 0, 1.16]\n");
-  const std::string error = ErrorOf([&] {
+  const std::string error = ThrownMessage<RectifyError>([&] {
     msgs::CameraInfo info;
     calib::FillCameraInfo(calib::ReadCalibrationFile(nan), 0.001, info);
     Rectifier r(info, {}, "calibration file '" + nan + "'");
@@ -346,38 +348,38 @@ TEST(Rectify, BadInputIsOneLineNamingTheTopic) {
   const std::string topic = "/camera/camera_info";
   msgs::CameraInfo info = test::Freiburg1Info();
   info.distortion_count = 4;
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: distortion model plumb_bob has 5 coefficients, "
             "distortion_count is 4");
   info = test::Freiburg1Info();
   info.distortion[2] = std::nan("");
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: distortion coefficient 2 (p1) is NaN");
   info.distortion[2] = INFINITY;
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: distortion coefficient 2 (p1) is infinite");
   info = test::Freiburg1Info();
   info.distortion_model = static_cast<msgs::DistortionModel>(9);
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: invalid distortion model 9 (expected none, plumb_bob or "
             "rational_polynomial)");
   info = test::Freiburg1Info();
   info.width = 0;
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: image size 0x480 (width and height must be > 0)");
   info = test::Freiburg1Info();
   info.fx = -1;
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(info, {}, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(info, {}, topic); }),
             "/camera/camera_info: fx and fy must be finite and > 0");
   RectifyOptions alpha;
   alpha.alpha = 2;
-  EXPECT_EQ(ErrorOf([&] { Rectifier r(test::Freiburg1Info(), alpha, topic); }),
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] { Rectifier r(test::Freiburg1Info(), alpha, topic); }),
             "/camera/camera_info: alpha 2.000000 is outside [0, 1] (or < 0 to keep the camera "
             "matrix)");
 
   const Rectifier rectifier(test::Freiburg1Info(), {}, topic);
   TestImage small(320, 240, msgs::Encoding::kRgb8), out(640, 480, msgs::Encoding::kRgb8);
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] {
               rectifier.Rectify(small.header, small.pixels, out.header, out.pixels,
                                 "/camera/image");
             }),
@@ -385,16 +387,17 @@ TEST(Rectify, BadInputIsOneLineNamingTheTopic) {
             "/camera/camera_info)");
   TestImage in(640, 480, msgs::Encoding::kRgb8);
   std::vector<std::byte> tiny(100);
-  EXPECT_EQ(
-      ErrorOf([&] { rectifier.Rectify(in.header, in.pixels, out.header, tiny, "/camera/image"); }),
-      "/camera/image: output buffer of 100 bytes, 921600 needed");
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] {
+              rectifier.Rectify(in.header, in.pixels, out.header, tiny, "/camera/image");
+            }),
+            "/camera/image: output buffer of 100 bytes, 921600 needed");
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] {
               rectifier.Rectify(in.header, std::span(in.pixels).first(10), out.header, out.pixels,
                                 "/camera/image");
             }),
             "/camera/image: Image 640x480 rgb8 (step 1920) needs 921600 payload bytes, got 10");
   in.header.encoding = msgs::Encoding::kInvalid;
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<RectifyError>([&] {
               rectifier.Rectify(in.header, in.pixels, out.header, out.pixels, "/camera/image");
             }),
             "/camera/image: invalid image encoding 0");
