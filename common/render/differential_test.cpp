@@ -23,7 +23,7 @@
 namespace {
 
 using namespace probeless;
-using probeless::testing::ErrorOf;
+using probeless::testing::ThrownMessage;
 
 constexpr int kW = 320, kH = 240;
 constexpr float kWallZ = 2.0f;
@@ -481,7 +481,7 @@ TEST(Differential, RealBoxShadowsAndLightsTheVirtualSphereRim) {
   EXPECT_NEAR(raytrace::Srgb8ToLinear(dark.rgb[c]), 0.0625, 0.005);
   EXPECT_NEAR(raytrace::Srgb8ToLinear(lit.rgb[c]), 0.5, 0.01);
   in.virtual_rect = {0, 0, kW + 1, kH};
-  EXPECT_EQ(ErrorOf([&] { gl.Render(in, lit); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] { gl.Render(in, lit); }),
             "frame: virtual shading needs a rect inside the image and 3 values per rect pixel in "
             "both buffers");
 }
@@ -504,7 +504,8 @@ TEST(Placement, RestsOnTheSurfaceSeenAtThePixel) {
   EXPECT_NEAR(t->translation[2], 2 - 0.15, 0.003);
   const Wall holes(0, kW, 0.0f);  // no depth anywhere
   EXPECT_FALSE(render::PlaceOnSurface(holes.View(), 10, 10, camera_to_world, meshes).has_value());
-  EXPECT_EQ(ErrorOf([&] { render::PlaceOnSurface(wall.View(), 400, 10, camera_to_world, meshes); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>(
+                [&] { render::PlaceOnSurface(wall.View(), 400, 10, camera_to_world, meshes); }),
             "object_pixel [400, 10] is outside the 320x240 image");
 }
 
@@ -596,45 +597,47 @@ TEST(Differential, Errors) {
   const Wall wall;
   render::VirtualGeometry g;
   render::RasterObject none{};
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] {
               render::RasteriseObjects(wall.View(), {&none, 1}, &g);
             }),
             "render::RasteriseObjects: objects[0]: no mesh");
   raytrace::Mesh bare = raytrace::MakeSphere(0.1f, 8);
   bare.normals.clear();
   render::RasterObject o{&bare, At(0, 0, 1), {1, 1, 1}, true};
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] {
               render::RasteriseObjects(wall.View(), {&o, 1}, &g);
             }),
             "render::RasteriseObjects: objects[0]: the mesh needs one normal per vertex");
   render::DifferentialOptions bad;
   bad.step = 0;
-  EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(bad); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] { render::DifferentialRenderer r(bad); }),
             "differential: step must be >= 1, got 0");
   render::DifferentialOptions fixed_sun;
   fixed_sun.sun_shadow = true;
-  EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(fixed_sun); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] { render::DifferentialRenderer r(fixed_sun); }),
             "differential: sun_shadow needs tone ratio (the crisp shadow divides R'_d by R_d)");
   fixed_sun.tone = render::DifferentialTone::kRatio;
   fixed_sun.sun_map_size = 8;
-  EXPECT_EQ(ErrorOf([&] { render::DifferentialRenderer r(fixed_sun); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] { render::DifferentialRenderer r(fixed_sun); }),
             "differential: sun_map_size must be in 16..4096, got 8");
   render::DifferentialRenderer renderer({});
   render::DifferentialFrame f;
   f.real = wall.View();
   render::DifferentialResult r;
-  EXPECT_EQ(ErrorOf([&] { renderer.Compute(f, &r); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] { renderer.Compute(f, &r); }),
             "render::DifferentialRenderer::Compute: with_virtual must be G_r' of the 320x240 G_r "
             "(RasteriseObjects)");
   std::vector<uint8_t> small(10);
-  EXPECT_EQ(ErrorOf([&] { render::ApplyDifferential(r, kW, kH, small); }),
-            "render::ApplyDifferential: camera image has 10 bytes, expected 3 x 320x240");
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(
+      ThrownMessage<render::RenderError>([&] { render::ApplyDifferential(r, kW, kH, small); }),
+      "render::ApplyDifferential: camera image has 10 bytes, expected 3 x 320x240");
+  EXPECT_EQ(ThrownMessage<render::RenderError>([&] {
               render::RasteriseHead(raytrace::MakeSphere(0.1f, 8), At(0, 0, 1), wall.k, kW, kH,
                                     small, &g);
             }),
             "render::RasteriseHead: camera image of 10 bytes, expected 230400 (320x240 rgb8)");
-  EXPECT_EQ(ErrorOf([&] { render::RasteriseHead(bare, At(0, 0, 1), wall.k, kW, kH, {}, &g); }),
+  EXPECT_EQ(ThrownMessage<render::RenderError>(
+                [&] { render::RasteriseHead(bare, At(0, 0, 1), wall.k, kW, kH, {}, &g); }),
             "render::RasteriseHead: render::RasteriseObjects: objects[0]: the mesh needs one "
             "normal per vertex");
   // The renderer's light units (render/msgs_io.h): linear used, face-model refused with a reason.
