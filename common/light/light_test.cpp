@@ -22,7 +22,7 @@ namespace {
 using namespace probeless;
 using light::Vec3f;
 
-using probeless::testing::ErrorOf;
+using probeless::testing::ThrownMessage;
 
 // An analytic scene seen by a 160x120 camera (fx = fy = 120): kPlane, a wall at z = 3 m facing
 // the camera; kFloor, that wall and a floor 0.5 m below the camera (y = +0.5, normal -y); kValley,
@@ -217,7 +217,7 @@ TEST(Transfer, RegionEqualsTheFullTransferAtItsPixels) {
       }
     }
   }
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               region.ComputeRegion(scene.View(), {}, nullptr, {150, 0, 161, 10}, 1, &b);
             }),
             "light::TransferComputer::ComputeRegion: rect [150, 161) x [0, 10) is empty or not "
@@ -229,12 +229,12 @@ TEST(Transfer, RegionEqualsTheFullTransferAtItsPixels) {
   EXPECT_EQ(b.valid[5], 0);
   EXPECT_EQ(b.transfer[5 * 16], 0.0f);
   EXPECT_EQ(b.transfer[6 * 16], a.transfer[(40 * 160 + 76) * 16]);
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               region.ComputeRegion(scene.View(), {}, nullptr, {70, 40, 101, 77}, 1, &b,
                                    std::span<const uint8_t>(mask).first(3));
             }),
             "light::TransferComputer::ComputeRegion: mask has 3 bytes, expected 31x37");
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               region.ComputeRegion(scene.View(), {}, nullptr, {0, 0, 5, 5}, 0, &b);
             }),
             "light::TransferComputer::ComputeRegion: step must be >= 1, got 0");
@@ -349,10 +349,12 @@ TEST(Transfer, IndirectLightBouncesAcrossTheValley) {
   EXPECT_EQ(out->width, 160u);
   const auto row = msgs::ImageRow<float>(*out, out.payload, 60);
   EXPECT_EQ(row[3 * 82 + 1], r.indirect[3 * corner + 1]);
-  EXPECT_EQ(ErrorOf([&] { light::FillIndirectImage(r, out.message, out.payload.first(100)); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::FillIndirectImage(r, out.message, out.payload.first(100)); }),
             "light::FillIndirectImage: payload of 100 bytes, need 230400");
   computer.Compute(scene.View(), {}, nullptr, &r);  // no dominant light: no indirect buffer
-  EXPECT_EQ(ErrorOf([&] { light::FillIndirectImage(r, out.message, out.payload); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::FillIndirectImage(r, out.message, out.payload); }),
             "light::FillIndirectImage: the transfer result has no indirect buffer (0 values for "
             "160x120 pixels; Compute needs a DominantLight)");
 }
@@ -610,7 +612,8 @@ TEST(Normals, FilterDropsCreasesAndGrazingSurfaces) {
   light::FilterNormals(scene.depth, scene.w, scene.h, scene.k, o, same);
   EXPECT_EQ(same, scene.normals);
   EXPECT_EQ(
-      ErrorOf([&] { light::FilterNormals(scene.depth, scene.w, scene.h - 1, scene.k, o, same); }),
+      ThrownMessage<light::LightError>(
+          [&] { light::FilterNormals(scene.depth, scene.w, scene.h - 1, scene.k, o, same); }),
       "light::FilterNormals: depth has 19200 values and normals 57600, expected 160x119 (x3)");
 }
 
@@ -644,7 +647,7 @@ TEST(Estimate, ShRotationMatrixRotatesADirectionalLight) {
     worst = std::max(worst, std::abs(v - la[k]));
   }
   EXPECT_LT(worst, 2e-5);
-  EXPECT_EQ(ErrorOf([&] { light::ShRotationMatrix(r, 6, &m); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::ShRotationMatrix(r, 6, &m); }),
             "light::ShRotationMatrix: bands must be 1..5, got 6");
 }
 
@@ -714,7 +717,7 @@ TEST(Reliability, LowAtDepthEdgesAndCreasesHighOnPlanesAndSpheres) {
   int edge_low = 0;
   for (int u = 100; u <= 108; ++u) edge_low += at(u, 60) < 0.1f;
   EXPECT_GE(edge_low, 3);  // the silhouette and its window
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               light::NormalReliability(sphere.depth, sphere.w, sphere.h - 1, sphere.k,
                                        sphere.normals, o, &r);
             }),
@@ -763,7 +766,7 @@ TEST(Reliability, EdgeAwareNormalsComeFromThePixelsOwnSurface) {
   light::NormalsWithReliability(spike.depth, spike.w, spike.h, spike.k, o, &edge, &r);
   EXPECT_LT(r[60 * spike.w + 80], 0.01f);
   EXPECT_GT(r[60 * spike.w + 90], 0.99f);
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               light::NormalsWithReliability(spike.depth, spike.w, spike.h - 1, spike.k, o, &edge,
                                             &r);
             }),
@@ -805,12 +808,13 @@ TEST(Reliability, DepthNoiseTellsCleanFromQuantisedDepth) {
   EXPECT_NEAR(normals[3 * centre + 2], -1.0f, 1e-4);
   light::DepthGeometryOptions bad;
   bad.step = 0;
-  EXPECT_EQ(
-      ErrorOf([&] { light::DepthGeometry(near.depth, near.w, near.h, near.k, bad, &normals); }),
-      "light::DepthGeometry: step must be -1 (by the noise) or >= 1, got 0");
-  EXPECT_EQ(
-      ErrorOf([&] { light::DepthGeometry(near.depth, near.w, near.h, near.k, defaults, nullptr); }),
-      "light::DepthGeometry: normals must not be null");
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::DepthGeometry(near.depth, near.w, near.h, near.k, bad, &normals); }),
+            "light::DepthGeometry: step must be -1 (by the noise) or >= 1, got 0");
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
+              light::DepthGeometry(near.depth, near.w, near.h, near.k, defaults, nullptr);
+            }),
+            "light::DepthGeometry: normals must not be null");
 }
 
 // A room-like frame: unoccluded transfer rows of three planes (floor, back and left wall: 3000,
@@ -910,12 +914,12 @@ TEST(Estimate, ReliabilityWeightsIgnoreCorruptedNormals) {
   // Weights of 1 change nothing.
   EXPECT_EQ(neutral.coefficients, plain.coefficients);
   // Sizes are checked.
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               light::EstimateLight(f.transfer, f.intensity, o, {}, std::vector<float>(w - 1, 1.0f));
             }),
             "light::EstimateLight: reliability has " + std::to_string(w - 1) +
                 " values, transfer is " + std::to_string(w) + "x1");
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               light::SolveLight(std::vector<float>(32, 0.0f), std::vector<float>(2, 0.0f), 16, o,
                                 std::vector<float>(3, 1.0f));
             }),
@@ -1004,7 +1008,7 @@ TEST(Temporal, PoolsNoisyFramesAndFollowsASwitchWithinThreeFrames) {
         rotating.Estimate(g.transfer, g.intensity, o, g.colour, f > 0 ? r : nullptr), d);
   }
   EXPECT_LT(last, 2.0);
-  EXPECT_EQ(ErrorOf([] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([] {
               light::TemporalLightEstimator bad({0, 0.5f});
             }),
             "light::TemporalLightEstimator: frames must be >= 1 and forgetting in [0, 1]");
@@ -1067,7 +1071,7 @@ TEST(Messages, WorldPointInCamera) {
   EXPECT_NEAR(p[1], 0, 1e-6);
   EXPECT_NEAR(p[2], 0, 1e-6);
   pose.rotation = {0, 0, 0, 0};
-  EXPECT_EQ(ErrorOf([&] {
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] {
               light::WorldPointInCamera(pose, {0, 0, 0});
             }),
             "light::WorldPointInCamera: the camera's rotation quaternion has norm 0.000000, "
@@ -1080,27 +1084,27 @@ TEST(Errors, BadInputsGiveOneLineMessages) {
   light::TransferResult r;
   auto view = scene.View();
   view.depth = std::span<const float>(scene.depth.data(), 100);
-  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { computer.Compute(view, {}, nullptr, &r); }),
             "light::TransferComputer::Compute: depth has 100 values, expected 160x120");
   view = scene.View();
   view.normals = {};
-  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { computer.Compute(view, {}, nullptr, &r); }),
             "light::TransferComputer::Compute: missing normals");
   view = scene.View();
   view.intrinsics.fx = std::nan("");
-  EXPECT_EQ(ErrorOf([&] { computer.Compute(view, {}, nullptr, &r); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { computer.Compute(view, {}, nullptr, &r); }),
             "light::TransferComputer::Compute: non-finite intrinsics");
   light::TransferOptions bad;
   bad.directions = 4;
-  EXPECT_EQ(ErrorOf([&] { light::TransferComputer c(bad); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::TransferComputer c(bad); }),
             "light::DirectionSet: directions must be 8..256, got 4");
   computer.Compute(scene.View(), {}, nullptr, &r);
   std::vector<float> grey(10);
-  EXPECT_EQ(ErrorOf([&] { light::EstimateLight(r, grey, {}); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::EstimateLight(r, grey, {}); }),
             "light::EstimateLight: intensity has 10 values, transfer is 160x120");
   grey.assign(160 * 120, 0.1f);
   std::vector<uint8_t> colour(5);
-  EXPECT_EQ(ErrorOf([&] { light::EstimateLight(r, grey, {}, colour); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::EstimateLight(r, grey, {}, colour); }),
             "light::EstimateLight: colour has 5 bytes, expected 3 x 160x120");
   // Message adapters.
   msgs::CameraInfo info;
@@ -1108,18 +1112,19 @@ TEST(Errors, BadInputsGiveOneLineMessages) {
   info.height = 120;
   info.fx = std::nan("");
   info.fy = 120;
-  EXPECT_EQ(ErrorOf([&] { light::IntrinsicsFrom(info, 160, 120); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::IntrinsicsFrom(info, 160, 120); }),
             "light::IntrinsicsFrom: camera info has non-finite intrinsics");
   info.fx = 120;
-  EXPECT_EQ(ErrorOf([&] { light::IntrinsicsFrom(info, 320, 240); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::IntrinsicsFrom(info, 320, 240); }),
             "light::IntrinsicsFrom: camera info is 160x120, buffer is 320x240");
   msgs::GeometryBuffer g;
   g.Init(160, 120);
   std::vector<std::byte> payload(msgs::GeometryBuffer::StandardPayloadBytes(160, 120));
   auto depth = msgs::DepthPlane(g, std::span<std::byte>(payload));
   std::fill(depth.begin(), depth.end(), 2.0f);
-  EXPECT_EQ(ErrorOf([&] { light::ViewOfGeometryBuffer(g, payload, info); }),
-            "light::ViewOfGeometryBuffer: missing normals (all zero)");
+  EXPECT_EQ(
+      ThrownMessage<light::LightError>([&] { light::ViewOfGeometryBuffer(g, payload, info); }),
+      "light::ViewOfGeometryBuffer: missing normals (all zero)");
 }
 
 }  // namespace

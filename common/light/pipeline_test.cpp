@@ -19,7 +19,7 @@
 namespace {
 
 using namespace probeless;
-using probeless::testing::ErrorOf;
+using probeless::testing::ThrownMessage;
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kY0 = 0.28209479177387814;
@@ -487,7 +487,7 @@ TEST(ScenePipeline, BadOptionsAndInput) {
   auto error = [](auto&& edit) {
     light::ScenePipelineOptions o = SmallOptions();
     edit(o);
-    return ErrorOf([&] { light::ScenePipeline p(o); });
+    return ThrownMessage<light::LightError>([&] { light::ScenePipeline p(o); });
   };
   EXPECT_EQ(error([](auto& o) { o.temporal.frames = 2; }),
             "light::ScenePipeline: temporal.frames > 1 needs light_model distant, got auto");
@@ -517,21 +517,21 @@ TEST(ScenePipeline, BadOptionsAndInput) {
   s.LitByDistant(kSun, 3.0, 0.3);
   light::ScenePipeline pipeline(SmallOptions());
   light::SceneFrame in = s.Input(1, false);
-  EXPECT_EQ(ErrorOf([&] { pipeline.Process(in); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { pipeline.Process(in); }),
             "light::ScenePipeline::Process: source geometry buffer, but the frame has no G-buffer "
             "depth");
   in = s.Input(1);
   in.grey = std::span<const float>(s.grey).first(100);
-  EXPECT_EQ(ErrorOf([&] { pipeline.Process(in); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { pipeline.Process(in); }),
             "light::ScenePipeline::Process: grey has 100 values, expected 160x120");
   in = s.Input(1);
   in.gbuffer_normals = {};
-  EXPECT_EQ(ErrorOf([&] { pipeline.Process(in); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { pipeline.Process(in); }),
             "light::ScenePipeline::Process: missing normals");
   light::ScenePipelineOptions depth_source = SmallOptions();
   depth_source.source = light::SceneGeometrySource::kDepthImage;
   light::ScenePipeline from_depth(depth_source);
-  EXPECT_EQ(ErrorOf([&] { from_depth.Process(s.Input(1)); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { from_depth.Process(s.Input(1)); }),
             "light::ScenePipeline::Process: source depth image, but the frame has none");
 }
 

@@ -19,7 +19,7 @@ namespace {
 using namespace probeless;
 using light::Vec3f;
 
-using probeless::testing::ErrorOf;
+using probeless::testing::ThrownMessage;
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kY0 = 0.28209479177387814;
@@ -348,25 +348,28 @@ TEST(PointLight, BadInputThrowsClearErrors) {
   const std::vector<float> image = s.LitByLamp(std::array<double, 3>{0, -0.5, 2}.data(), 2, 0.1);
   std::vector<float> none(s.depth.size(), 0.0f);
   light::GeometryView empty{s.w, s.h, s.k, none, s.normals, {}};
-  EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(empty, image, {}, 3); }),
-            "light::EstimatePointLight: no valid pixels (depth > 0 with a normal)");
+  EXPECT_EQ(
+      ThrownMessage<light::LightError>([&] { light::EstimatePointLight(empty, image, {}, 3); }),
+      "light::EstimatePointLight: no valid pixels (depth > 0 with a normal)");
   light::GeometryView nan = s.View();
   nan.intrinsics.fx = NAN;
-  EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(nan, image, {}, 3); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::EstimatePointLight(nan, image, {}, 3); }),
             "light::EstimatePointLight: non-finite intrinsics");
-  EXPECT_EQ(
-      ErrorOf([&] { light::EstimatePointLight(s.View(), std::span(image).first(10), {}, 3); }),
-      "light::EstimatePointLight: intensity has 10 values, expected 160x120");
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::EstimatePointLight(s.View(), std::span(image).first(10), {}, 3); }),
+            "light::EstimatePointLight: intensity has 10 values, expected 160x120");
   light::PointLightOptions three;
   three.max_lamps = 3;
-  EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(s.View(), image, three, 3); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::EstimatePointLight(s.View(), image, three, 3); }),
             "light::EstimatePointLight: max_lamps must be 1 or 2");
   light::PointLightOptions screen;
   screen.screen_rows = -1;
-  EXPECT_EQ(ErrorOf([&] { light::EstimatePointLight(s.View(), image, screen, 3); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>(
+                [&] { light::EstimatePointLight(s.View(), image, screen, 3); }),
             "light::EstimatePointLight: screen_rows must be >= 0, warm_lm_iterations and "
             "screen_lm_iterations >= 1");
-  EXPECT_EQ(ErrorOf([] { light::ParseLightModel("near"); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([] { light::ParseLightModel("near"); }),
             "light::ParseLightModel: light model must be distant, point or auto, got 'near'");
   EXPECT_EQ(light::ParseLightModel("auto"), light::LightModel::kAuto);
   EXPECT_STREQ(light::LightModelName(light::LightModel::kPoint), "point");

@@ -355,28 +355,29 @@ TEST(Shadow, OneLineErrors) {
   Scene s;
   s.Render(kLight, 1.5, 0.2);
   std::vector<float> short_grey(5, 0.5f);
-  EXPECT_EQ(probeless::testing::ErrorOf(
+  EXPECT_EQ(probeless::testing::ThrownMessage<LightError>(
                 [&] { EstimateShadowDirection(s.View(), short_grey, ShadowOptions{}); }),
             "light::EstimateShadowDirection: intensity has 5 values, expected 76800");
   ShadowOptions bad;
   bad.stride = 0;
-  EXPECT_EQ(probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad); }),
+  EXPECT_EQ(probeless::testing::ThrownMessage<LightError>(
+                [&] { EstimateShadowDirection(s.View(), s.grey, bad); }),
             "light::EstimateShadowDirection: strides must be >= 1");
   ShadowOptions bad_cue = RawDepthShadowOptions();
   bad_cue.unexplained_dark_weight = 1.5f;
-  EXPECT_EQ(
-      probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad_cue); }),
-      "light::EstimateShadowDirection: unexplained_dark_weight must be in [0, 1]");
+  EXPECT_EQ(probeless::testing::ThrownMessage<LightError>(
+                [&] { EstimateShadowDirection(s.View(), s.grey, bad_cue); }),
+            "light::EstimateShadowDirection: unexplained_dark_weight must be in [0, 1]");
   ShadowOptions bad_keep;
   bad_keep.cue_keep_ratio = 1.2f;
-  EXPECT_EQ(
-      probeless::testing::ErrorOf([&] { EstimateShadowDirection(s.View(), s.grey, bad_keep); }),
-      "light::EstimateShadowDirection: keep_ratio and cue_keep_ratio must be in [0, 1]");
+  EXPECT_EQ(probeless::testing::ThrownMessage<LightError>(
+                [&] { EstimateShadowDirection(s.View(), s.grey, bad_keep); }),
+            "light::EstimateShadowDirection: keep_ratio and cue_keep_ratio must be in [0, 1]");
   GeometryView nan_k = s.View();
   nan_k.intrinsics.fx = NAN;
-  EXPECT_EQ(
-      probeless::testing::ErrorOf([&] { EstimateShadowDirection(nan_k, s.grey, ShadowOptions{}); }),
-      "light::EstimateShadowDirection: non-finite intrinsics");
+  EXPECT_EQ(probeless::testing::ThrownMessage<LightError>(
+                [&] { EstimateShadowDirection(nan_k, s.grey, ShadowOptions{}); }),
+            "light::EstimateShadowDirection: non-finite intrinsics");
 }
 
 // With the light prior on, accepted cast shadows override it (ScenePipelineOptions::

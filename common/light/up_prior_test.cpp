@@ -19,7 +19,7 @@
 namespace {
 
 using namespace probeless;
-using probeless::testing::ErrorOf;
+using probeless::testing::ThrownMessage;
 
 constexpr double kDeg = std::numbers::pi / 180;
 
@@ -114,11 +114,11 @@ TEST(UpDirection, BadOptionsThrow) {
   const TiltedView view(30, 0);
   light::UpDirectionOptions o;
   o.stride = 0;
-  EXPECT_EQ(ErrorOf([&] { light::EstimateUpDirection(view.View(), o); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::EstimateUpDirection(view.View(), o); }),
             "light::EstimateUpDirection: stride must be >= 1, got 0");
   o = {};
   o.kernel_deg = 70;
-  EXPECT_EQ(ErrorOf([&] { light::EstimateUpDirection(view.View(), o); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::EstimateUpDirection(view.View(), o); }),
             "light::EstimateUpDirection: need 0 < kernel_deg <= search_deg < 90 (degrees)");
 }
 
@@ -191,7 +191,7 @@ TEST(LightPrior, PullsTowardsTheZonalLightAndLeavesAConsistentOneAlone) {
   e = light::SolveLight(rows, targets, cc, o);
   for (int k = 0; k < cc; ++k) EXPECT_EQ(e.coefficients[k], free.coefficients[k]) << k;
   o.prior.weight = -1;
-  EXPECT_EQ(ErrorOf([&] { light::SolveLight(rows, targets, cc, o); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::SolveLight(rows, targets, cc, o); }),
             "light::SolveLight: prior.weight must be finite and >= 0");
 }
 
@@ -303,7 +303,7 @@ TEST(ScenePipeline, ConfidenceIsTheCalibratedExpectedError) {
   EXPECT_EQ(q.light.confidence, q.evidence.fit_confidence);
 
   o.confidence_knots = std::vector<double>{0.5, 20, 0.2, 30};
-  EXPECT_EQ(ErrorOf([&] { light::ScenePipeline bad(o); }),
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::ScenePipeline bad(o); }),
             "light::ScenePipeline: confidence_knots: confidence calibration: knot 1 needs a raw "
             "confidence in [0, 1] above the previous one and an error > 0");
 }
