@@ -235,6 +235,9 @@ TEST_F(ReplayIntegrationTest, BadInputGivesOneLineErrorsAndExitCode2) {
   r = Run(kBin + "/probeless bag convert " + folder + " " + out + " --fps 0");
   EXPECT_EQ(r.code, 2);
   EXPECT_EQ(FirstLine(r.err), "probeless bag: convert: --fps expects a positive number, got '0'");
+  r = Run(kBin + "/probeless bag convert " + folder + " " + out + " --fps");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_EQ(FirstLine(r.err), "probeless bag: convert: --fps needs a value");
   EXPECT_FALSE(fs::exists(out));
   r = Run(kBin + "/probeless bag frobnicate");
   EXPECT_EQ(r.code, 2);

@@ -4,6 +4,8 @@
 // per transport and scenario (fork + exec of itself with --role), drives measurement phases
 // through a shared control block and prints/writes the results. See --help and
 // docs/benchmarks/bus.md.
+#include "probeless/node/main.h"
+
 #include <dirent.h>
 #include <signal.h>
 #include <sys/mman.h>
@@ -888,7 +890,7 @@ int Main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(arg + " needs a value");
+      if (i + 1 >= argc) throw node::UsageError(arg + " needs a value");
       return argv[++i];
     };
     if (arg == "--json") {
@@ -915,11 +917,11 @@ int Main(int argc, char** argv) {
       PrintUsage();
       return 0;
     } else {
-      throw std::invalid_argument("unknown argument '" + arg + "' (see --help)");
+      throw node::UsageError("unknown argument '" + arg + "' (see --help)");
     }
   }
   if (!role.empty()) return RunRole(role, ctl_fd, index);
-  if (full && smoke) throw std::invalid_argument("--full and --smoke exclude each other");
+  if (full && smoke) throw node::UsageError("--full and --smoke exclude each other");
 
   Plan plan;
   plan.pin = pin;
@@ -977,8 +979,8 @@ int Main(int argc, char** argv) {
       } else if (t == "iceoryx") {
         plan.transports.push_back(Transport::kIceoryx);
       } else {
-        throw std::invalid_argument("unknown transport '" + t +
-                                    "' (expected probeless, uds or iceoryx)");
+        throw node::UsageError("unknown transport '" + t +
+                               "' (expected probeless, uds or iceoryx)");
       }
     }
   }
@@ -1093,10 +1095,6 @@ const char* TransportName(Transport transport) {
 }  // namespace probeless::bus_bench
 
 int main(int argc, char** argv) {
-  try {
-    return probeless::bus_bench::Main(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "bus_bench: %s\n", e.what());
-    return 2;
-  }
+  return probeless::node::RunMain("bus_bench",
+                                  [&] { return probeless::bus_bench::Main(argc, argv); });
 }

@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/log/mcap.h"
 #include "probeless/log/mcap_reader.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/header.h"
@@ -171,7 +172,7 @@ int Run(int argc, char** argv) {
     }
   }
   if (truths.empty()) {
-    throw std::invalid_argument(log_path + ": no " + truth_topic + " messages (msgs::ShLight)");
+    throw log::LogError(log_path + ": no " + truth_topic + " messages (msgs::ShLight)");
   }
 
   // Series over the truth's frames; NaN where there is no estimate.

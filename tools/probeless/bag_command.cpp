@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "commands.h"
+#include "probeless/error/error.h"
 #include "probeless/log/mcap.h"
 #include "probeless/log/mcap_reader.h"
 #include "probeless/parse/number.h"
@@ -148,7 +149,7 @@ int Convert(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      if (i + 1 >= argc) throw InputError(a + " needs a value");
       return argv[++i];
     };
     try {

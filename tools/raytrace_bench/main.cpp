@@ -13,6 +13,8 @@
 // prints its rms error per pixel and channel against a reference PFM (a high-spp render), divided
 // by the reference's mean; --pt-size renders the room smaller (the same view), --pt-only skips rows
 // 1-4.
+#include "probeless/node/main.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -114,7 +116,7 @@ int Run(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      if (i + 1 >= argc) throw probeless::node::UsageError(a + " needs a value");
       return argv[++i];
     };
     if (a == "-h" || a == "--help") {
@@ -143,7 +145,8 @@ int Run(int argc, char** argv) {
     } else if (a == "--pt-size") {
       const std::string v = value();
       const size_t x = v.find('x');
-      if (x == std::string::npos) throw std::invalid_argument("--pt-size expects WxH, got " + v);
+      if (x == std::string::npos)
+        throw probeless::node::UsageError("--pt-size expects WxH, got " + v);
       pt_width = parse::ParseInteger<int>(a, v.substr(0, x), 1);
       pt_height = parse::ParseInteger<int>(a, v.substr(x + 1), 1);
     } else if (a == "--pt-seed") {
@@ -155,17 +158,18 @@ int Run(int argc, char** argv) {
     } else if (a == "--pt-ref") {
       pt_ref = value();
     } else {
-      throw std::invalid_argument("unknown option '" + a +
-                                  "' (expected --scenario, --frames, --threads, --json, --pt-spp, "
-                                  "--pt-image, --no-pt, --pt-only, --pt-size, --pt-seed, --pt-rr, "
-                                  "--pt-raw, --pt-ref)");
+      throw probeless::node::UsageError(
+          "unknown option '" + a +
+          "' (expected --scenario, --frames, --threads, --json, --pt-spp, "
+          "--pt-image, --no-pt, --pt-only, --pt-size, --pt-seed, --pt-rr, "
+          "--pt-raw, --pt-ref)");
     }
   }
   if (frames < 1 || threads < 1 || pt_spp < 1) {
-    throw std::invalid_argument("--frames, --threads and --pt-spp must be >= 1");
+    throw probeless::node::UsageError("--frames, --threads and --pt-spp must be >= 1");
   }
   if (pt_only && !pathtrace)
-    throw std::invalid_argument("--pt-only and --no-pt exclude each other");
+    throw probeless::node::UsageError("--pt-only and --no-pt exclude each other");
   sim::Scenario scenario = sim::LoadScenario(scenario_path);
   const uint64_t n = std::min<uint64_t>(frames, scenario.frames);
   sim::Simulator simulator(scenario, threads);
@@ -339,10 +343,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [raytrace_bench] %s\n", e.what());
-    return 2;
-  }
+  return probeless::node::RunMain("raytrace_bench", [&] { return Run(argc, argv); });
 }

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/node/main.h"
 #include "probeless/parse/number.h"
 #include "probeless/raytrace/pathtrace.h"
 #include "probeless/raytrace/render.h"
@@ -180,7 +181,7 @@ int Run(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::invalid_argument(a + " needs a value");
+      if (i + 1 >= argc) throw probeless::node::UsageError(a + " needs a value");
       return argv[++i];
     };
     if (a == "-h" || a == "--help") {
@@ -195,18 +196,18 @@ int Run(int argc, char** argv) {
     } else if (a == "--bounces") {
       bounces = probeless::parse::ParseInteger<int>(a, value(), 0);
     } else {
-      throw std::invalid_argument("unknown option '" + a +
-                                  "' (expected --out, --scene, --spp, --bounces)");
+      throw probeless::node::UsageError("unknown option '" + a +
+                                        "' (expected --out, --scene, --spp, --bounces)");
     }
   }
-  if (dir.empty()) throw std::invalid_argument("--out DIR is required");
+  if (dir.empty()) throw probeless::node::UsageError("--out DIR is required");
   CompareScene c;
   if (which == "interior") {
     BuildInterior(c);
   } else if (which == "outdoor") {
     BuildOutdoor(c);
   } else {
-    throw std::invalid_argument("--scene must be interior or outdoor, got '" + which + "'");
+    throw probeless::node::UsageError("--scene must be interior or outdoor, got '" + which + "'");
   }
   c.scene.environment().sh[0] = c.sky * (2 * std::sqrt(std::numbers::pi_v<float>));
   c.scene.Commit();
@@ -227,10 +228,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [pathtrace_compare] %s\n", e.what());
-    return 2;
-  }
+  return probeless::node::RunMain("pathtrace_compare", [&] { return Run(argc, argv); });
 }
