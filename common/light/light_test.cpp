@@ -475,51 +475,6 @@ TEST(Estimate, DominantDirectionAndNonNegativeModeOnPlaneTransfer) {
   EXPECT_GT(most_negative, 0.5 * plain_negative - 1e-9);
 }
 
-TEST(Estimate, DeltaDirectionSeparatesTheSunFromTheSky) {
-  // Sun P delta(w - d) plus a sky of bands 0-1 about up, seen through the transfer of the normals
-  // facing the camera (z < 0): band 1 mixes the two, band 2 is the sun's alone.
-  const light::DirectionSet set(64, 4, 1);
-  const sh::Vec3 sun{0.57, -0.41, -0.71};  // unit within 1e-2
-  const double sn = std::sqrt(sun[0] * sun[0] + sun[1] * sun[1] + sun[2] * sun[2]);
-  const sh::Vec3 d{sun[0] / sn, sun[1] / sn, sun[2] / sn};
-  auto l = sh::DirectionalLight(d, 3.0, 4);
-  const auto sky = sh::DirectionalLight(sh::Vec3{0, -1, 0}, 2.5, 4);
-  for (int k = 0; k < 4; ++k) l[k] += sky[k];
-  l[0] += 1.0;
-  std::vector<float> rows, targets;
-  for (const auto& n : sh::FibonacciSphere(600)) {
-    if (n[2] > 0) continue;
-    std::vector<double> t(16, 0);
-    for (int j = 0; j < set.count(); ++j) {
-      const auto& w = set.directions()[j];
-      const double c = std::max(0.0, w[0] * n[0] + w[1] * n[1] + w[2] * n[2]);
-      for (int k = 0; k < 16; ++k) t[k] += c * set.weights()[j * 16 + k];
-    }
-    double s = 0;
-    for (int k = 0; k < 16; ++k) {
-      rows.push_back(static_cast<float>(t[k]));
-      s += t[k] * l[k];
-    }
-    targets.push_back(static_cast<float>(s));
-  }
-  auto error_deg = [&](const light::LightEstimate& e) {
-    const double dot = e.dominant_direction[0] * d[0] + e.dominant_direction[1] * d[1] +
-                       e.dominant_direction[2] * d[2];
-    return std::acos(std::clamp(dot, -1.0, 1.0)) * 180 / std::numbers::pi;
-  };
-  light::EstimateOptions o;
-  const auto linear = light::SolveLight(rows, targets, 16, o);
-  ASSERT_TRUE(linear.valid);
-  EXPECT_GT(error_deg(linear), 10.0) << "band 1 points between the sun and the sky";
-  o.delta_direction = true;
-  const auto delta = light::SolveLight(rows, targets, 16, o);
-  ASSERT_TRUE(delta.valid);
-  EXPECT_LT(error_deg(delta), 2.0);
-  EXPECT_NEAR(delta.intensity, 3.0, 0.3);
-  // The published light is the same full fit either way.
-  for (int k = 0; k < 16; ++k) EXPECT_EQ(delta.coefficients[k], linear.coefficients[k]);
-}
-
 // Unoccluded transfer rows (A_l / pi) Y(n) of normals spread over the sphere facing the camera
 // (z < 0), grouped by the sign of n.x, and the light d with irradiance 3 plus an ambient term.
 struct GroupedScene {

@@ -22,7 +22,7 @@
 //   without camera info or image yet is skipped (one warning).
 // Params: mode (gbuffer), bands (4), directions (32), subsample (1; 4 = OursFast), radius (0.3 m),
 //   seed (1), threads (2), albedo (0.25), stride (4), robust (true), non_negative (false),
-//   direction_bands (2), delta_direction (false: EstimateOptions::delta_direction), albedo_groups (32 = per-material albedos from the image's chromaticity;
+//   direction_bands (2), albedo_groups (32 = per-material albedos from the image's chromaticity;
 //   0 = one uniform albedo), max_rows_per_bin (100), max_intensity (0.98: brighter pixels are left
 //   out of the fit), fill_clipped_chroma (false: ScenePipelineOptions::fill_clipped_chroma),
 //   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true),
@@ -96,7 +96,6 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   eo.robust = node.Param("robust", true);
   eo.non_negative = node.Param("non_negative", false);
   eo.direction_bands = node.Param("direction_bands", 2);
-  eo.delta_direction = node.Param("delta_direction", false);
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
   eo.max_intensity = static_cast<float>(node.Param("max_intensity", double{eo.max_intensity}));

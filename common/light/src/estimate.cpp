@@ -1,7 +1,6 @@
 #include "probeless/light/estimate.h"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstring>
 #include <numbers>
@@ -20,77 +19,6 @@ bool CholeskySolve(std::vector<double> a, std::vector<double> b, int n, std::vec
   if (!linalg::CholeskyFactor(a.data(), n)) return false;
   linalg::CholeskySolveFactored(a.data(), n, b.data());
   *x = std::move(b);
-  return true;
-}
-
-// The direction and power of the delta P delta(w - d) which, with free bands 0-1 beside it, best
-// fits the rows in the least-squares sense: for each candidate d the 5 unknowns (P, a_0..a_3)
-// solve the normal equations of l = P Y(d) + sum_k a_k e_k projected from those of the full fit
-// (ata = A^T W A, atb = A^T W t, tt = t^T W t), and the d of least residual wins: a Fibonacci set,
-// then two finer rounds about the best. Band 2 and up carry the delta alone (the ambient absorbs
-// band 1), so d and -d are told apart by `hemisphere` (d . hemisphere >= 0). Returns false
-// without a positive P.
-bool FitDeltaDirection(const std::vector<double>& ata, const std::vector<double>& atb, double tt,
-                       int cc, const sh::Vec3& hemisphere, sh::Vec3* direction, double* power) {
-  const int bands = static_cast<int>(std::lround(std::sqrt(cc)));
-  double best_residual = tt;
-  bool found = false;
-  auto try_direction = [&](const sh::Vec3& d) {
-    if (d[0] * hemisphere[0] + d[1] * hemisphere[1] + d[2] * hemisphere[2] < 0) return;
-    std::array<double, sh::kMaxCoefficients> u{};
-    sh::EvaluateBasis<double>(bands, d[0], d[1], d[2], u.data());
-    std::array<double, sh::kMaxCoefficients> mu{};
-    for (int r = 0; r < cc; ++r) {
-      for (int c = 0; c < cc; ++c) mu[r] += ata[r * cc + c] * u[c];
-    }
-    std::vector<double> n(25), rhs(5);
-    double umu = 0, ub = 0;
-    for (int r = 0; r < cc; ++r) {
-      umu += u[r] * mu[r];
-      ub += u[r] * atb[r];
-    }
-    n[0] = umu;
-    rhs[0] = ub;
-    for (int k = 0; k < 4; ++k) {
-      n[(k + 1)] = n[(k + 1) * 5] = mu[k];
-      rhs[k + 1] = atb[k];
-      for (int j = 0; j < 4; ++j) n[(k + 1) * 5 + (j + 1)] = ata[k * cc + j];
-    }
-    std::vector<double> theta;
-    if (!CholeskySolve(n, rhs, 5, &theta) || !(theta[0] > 0)) return;
-    double explained = 0;
-    for (int k = 0; k < 5; ++k) explained += theta[k] * rhs[k];
-    const double residual = tt - explained;
-    if (residual < best_residual) {
-      best_residual = residual;
-      *direction = d;
-      *power = theta[0];
-      found = true;
-    }
-  };
-  for (const auto& d : sh::FibonacciSphere(2048)) try_direction(d);
-  if (!found) return false;
-  // Refinement: a 5 x 5 grid in the tangent plane of the best direction, half as wide each round.
-  double step = 0.05;  // ~ the Fibonacci set's spacing (rad)
-  for (int round = 0; round < 3; ++round, step *= 0.5) {
-    const sh::Vec3 c = *direction;
-    const sh::Vec3 a = std::abs(c[0]) < 0.9 ? sh::Vec3{1, 0, 0} : sh::Vec3{0, 1, 0};
-    sh::Vec3 t1{a[1] * c[2] - a[2] * c[1], a[2] * c[0] - a[0] * c[2], a[0] * c[1] - a[1] * c[0]};
-    const double n1 = std::sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]);
-    for (double& v : t1) v /= n1;
-    const sh::Vec3 t2{c[1] * t1[2] - c[2] * t1[1], c[2] * t1[0] - c[0] * t1[2],
-                      c[0] * t1[1] - c[1] * t1[0]};
-    for (int i = -2; i <= 2; ++i) {
-      for (int j = -2; j <= 2; ++j) {
-        if (i == 0 && j == 0) continue;
-        sh::Vec3 d;
-        for (int k = 0; k < 3; ++k) d[k] = c[k] + step * (i * t1[k] + j * t2[k]);
-        const double dn = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        for (double& v : d) v /= dn;
-        try_direction(d);
-      }
-    }
-  }
   return true;
 }
 
@@ -463,23 +391,6 @@ LightEstimate SolveLight(std::span<const float> rows, std::span<const float> tar
   e.confidence = static_cast<float>(fit.r2 * std::min(1.0, fit.sw / (20.0 * cc)));
   e.coefficients = l;
   e.valid = true;
-  if (options.delta_direction && cc >= 9) {
-    // The data's normal equations without the prior, penalties or ridge: the delta is fitted to
-    // the evidence; the prior shapes the published light only.
-    std::fill(ata.begin(), ata.end(), 0.0);
-    std::fill(atb.begin(), atb.end(), 0.0);
-    Accumulate(cc, rows.data(), targets.data(), weight.data(), m, ata.data(), atb.data());
-    double tt = 0;
-    for (size_t i = 0; i < m; ++i) tt += double(weight[i]) * targets[i] * targets[i];
-    sh::Vec3 d{}, hemisphere = sh::OptimalLinearDirection(l.data());
-    double power = 0;
-    if (FitDeltaDirection(ata, atb, tt, cc, hemisphere, &d, &power)) {
-      e.dominant_direction = {static_cast<float>(d[0]), static_cast<float>(d[1]),
-                              static_cast<float>(d[2])};
-      e.intensity = static_cast<float>(power);
-      return e;
-    }
-  }
   const int dc = options.direction_bands * options.direction_bands;
   if (options.direction_bands >= 2 && dc < cc) {
     std::vector<float> linear_rows(m * dc);

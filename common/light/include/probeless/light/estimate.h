@@ -75,11 +75,6 @@ struct EstimateOptions {
   // Refit the direction twice on the pixels facing it (see estimate.cpp): a linear model is exact
   // there, while the pixels in attached shadow bias it.
   bool lit_refits = true;
-  // The dominant direction and intensity from the best delta P delta(w - d) beside free bands
-  // 0-1, fitted to the rows of the full fit (>= 3 bands; no prior): band 2 carries the delta
-  // alone, where band 1 mixes it with the sky and bounce light (docs/light.md). Off: the
-  // direction_bands fit.
-  bool delta_direction = false;
   // Per-group albedo from the colour image (EstimateLight): chromaticity cells per axis
   // (0 = off: one uniform albedo) and light <-> albedo alternations (>= 1; the direction fits
   // run in the last one only).
