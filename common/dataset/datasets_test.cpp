@@ -11,14 +11,15 @@
 
 #include "internal.h"
 #include "probeless/dataset/yaleb.h"
+#include "probeless/testing/expect.h"
 #include "testing_util.h"
 #include "text_io.h"
 
 namespace probeless::dataset {
 namespace {
 
+using probeless::testing::ThrownMessage;
 using testing::Drain;
-using testing::ErrorOf;
 using testing::TempDir;
 using testing::View;
 using testing::WriteText;
@@ -233,7 +234,7 @@ TEST(SevenScenesTest, BadFilesNameTheFileAndTheExpectation) {
   WriteText(pose1, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0\n");
   const std::unique_ptr<Source> source = OpenDataset(folder.path);
   for (int i = 0; i < 4; ++i) ASSERT_TRUE(source->Next().has_value());
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "malformed pose file '" + pose1 +
                 "': expected 16 numbers (a 4x4 camera-to-world matrix), found 15 numbers");
   // The pass continues with the next frame, and Rewind starts again.
@@ -246,20 +247,20 @@ TEST(SevenScenesTest, BadFilesNameTheFileAndTheExpectation) {
   WriteText(pose1, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 x\n");
   source->Rewind();
   for (int i = 0; i < 4; ++i) source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "malformed pose file '" + pose1 +
                 "': expected 16 numbers (a 4x4 camera-to-world matrix), found 'x'");
   WriteText(pose1, "2 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 0 1\n");
   source->Rewind();
   for (int i = 0; i < 4; ++i) source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "malformed pose file '" + pose1 +
                 "': expected a rotation (orthonormal, determinant +1) in the upper-left 3x3");
   WriteText(pose1, "1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 1 1\n");
   source->Rewind();
   for (int i = 0; i < 4; ++i) source->Next();
   EXPECT_EQ(
-      ErrorOf([&] { source->Next(); }),
+      ThrownMessage<DatasetError>([&] { source->Next(); }),
       "malformed pose file '" + pose1 + "': expected the last row 0 0 0 1 of a rigid transform");
 
   // An undecodable colour image.
@@ -268,7 +269,7 @@ TEST(SevenScenesTest, BadFilesNameTheFileAndTheExpectation) {
   WriteText(colour2, "not a png");
   source->Rewind();
   for (int i = 0; i < 8; ++i) source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "cannot decode colour image '" + colour2 + "': expected an 8-bit colour JPEG or PNG");
   // A depth image of the wrong type.
   WritePng(colour2, PatternBgr(64, 48, 3));
@@ -276,7 +277,7 @@ TEST(SevenScenesTest, BadFilesNameTheFileAndTheExpectation) {
   WritePng(depth2, PatternBgr(64, 48, 3));
   source->Rewind();
   for (int i = 0; i < 8; ++i) source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "depth image '" + depth2 +
                 "' is 64x48 8-bit 3-channel: expected a 16-bit single-channel 64x48 PNG like the "
                 "first frame");
@@ -287,24 +288,24 @@ TEST(SevenScenesTest, BadFolderErrorsAtOpen) {
   SevenScenesFolder folder(dir);
   const std::string intrinsics = folder.path + "/camera-intrinsics.txt";
   WriteText(intrinsics, "500 0 31.5 0 510 23.5 0 0\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed camera intrinsics '" + intrinsics +
                 "': expected 9 numbers (a 3x3 camera matrix), found 8 numbers");
   WriteText(intrinsics, "500 0 31.5 0 510 23.5 0 0 2\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed camera intrinsics '" + intrinsics +
                 "': expected a camera matrix [fx 0 cx; 0 fy cy; 0 0 1] with fx, fy > 0");
   std::filesystem::remove(intrinsics);
   std::filesystem::remove(folder.path + "/frame-000001.depth.png");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "missing depth image '" + folder.path +
                 "/frame-000001.depth.png' (the other frames of '" + folder.path + "' have one)");
   std::filesystem::remove(folder.path + "/frame-000001.color.png");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "7-Scenes folder '" + folder.path + "': '" + folder.path +
                 "/frame-000001.pose.txt' has no colour image frame-XXXXXX.color.jpg|png beside it");
   TempDir empty;
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("7scenes:" + empty.path()); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("7scenes:" + empty.path()); }),
             "7-Scenes folder '" + empty.path() + "' has no frame-XXXXXX.color.jpg|png files");
 }
 
@@ -480,24 +481,24 @@ TEST(TumTest, FreiburgIntrinsicsAndCameraInfoOverrides) {
             "image_width: 640\nimage_height: 480\n"
             "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0, 1]}\n");
   options.camera_info_path = ros;
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros + "' is for 640x480 images, the dataset's are 40x30");
   WriteText(ros, "image_width: 40\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros +
                 "': missing camera_matrix (expected a ROS camera_info YAML file)");
   WriteText(ros, "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0]}\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros + "': camera matrix has 8 entries, expected 9 (3x3)");
   WriteText(ros,
             "camera_matrix: {rows: 3, cols: 3, data: [1, 0, 2, 0, 1, 2, 0, 0, 1]}\n"
             "distortion_model: equidistant\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path, options); }),
             "calibration file '" + ros +
                 "': distortion_model 'equidistant' is not supported (expected plumb_bob or "
                 "rational_polynomial)");
   options.camera_info_path = dir.File("absent.yaml");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path, options); }),
             "cannot read calibration file '" + options.camera_info_path + "'");
 }
 
@@ -529,7 +530,7 @@ TEST(TumTest, CameraInfoYamlInTheFolderIsReadAndTheOptionWins) {
   }
   // A malformed folder file is an error naming it.
   WriteText(fr1.path + "/camera_info.yaml", "image_width: 40\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(fr1.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(fr1.path); }),
             "calibration file '" + fr1.path +
                 "/camera_info.yaml': missing camera_matrix (expected a ROS camera_info YAML file)");
 }
@@ -539,30 +540,30 @@ TEST(TumTest, MalformedListsAndMissingFiles) {
   TumFolder folder(dir);
   const std::string rgb = folder.path + "/rgb.txt";
   WriteText(rgb, "# comment\n1305031102.100000 rgb/a.png extra\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed line 2 of '" + rgb + "': expected 'timestamp filename'");
   WriteText(rgb, "1305031102,1 rgb/a.png\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed line 1 of '" + rgb + "': '1305031102,1' is not a timestamp in seconds");
   WriteText(rgb, "1305031102.1 rgb/missing.png\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "missing rgb image '" + folder.path + "/rgb/missing.png' (line 1 of '" + rgb + "')");
   WriteText(rgb, "# nothing\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "TUM list '" + rgb + "' lists no images (expected 'timestamp filename' lines)");
   WriteText(rgb, "1305031102.100000 rgb/a.png\n");
   const std::string gt = folder.path + "/groundtruth.txt";
   WriteText(gt, "1305031102.09 1 2 3 0 0 0\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed line 1 of '" + gt + "': expected 'timestamp tx ty tz qx qy qz qw'");
   WriteText(gt, "1305031102.09 1 2 3 0 0 0 2\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed line 1 of '" + gt + "': qx qy qz qw is not a unit quaternion");
   WriteText(gt, "1305031102.09 1 2 nan 0 0 0 1\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path); }),
             "malformed line 1 of '" + gt + "': 'nan' is not a number");
   std::filesystem::remove(folder.path + "/depth.txt");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("tum:" + folder.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("tum:" + folder.path); }),
             "cannot read TUM list '" + folder.path + "/depth.txt'");
 }
 
@@ -710,9 +711,10 @@ TEST(YaleBTest, SubjectFolderSubjectFilterAndErrors) {
     EXPECT_EQ(msgs::ImageRow<uint8_t>(*image, image.payload, 0)[0], 20);
   }
   options.yaleb_subjects = {2, 14};
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(folder.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(folder.path, options); }),
             "Yale B folder '" + folder.path + "' has no images of subject yaleB14");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("images:" + folder.path + "/yaleB01", options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>(
+                [&] { OpenDataset("images:" + folder.path + "/yaleB01", options); }),
             "dataset option yaleb_subjects applies to yaleb datasets only, not images");
   options.yaleb_subjects.clear();
   options.max_frames = 3;
@@ -722,12 +724,12 @@ TEST(YaleBTest, SubjectFolderSubjectFilterAndErrors) {
   WritePng(bad, cv::Mat(10, 10, CV_8UC1, cv::Scalar(0)));
   const std::unique_ptr<Source> source = OpenDataset(folder.path);
   for (int i = 0; i < 9; ++i) source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "Yale B image '" + bad +
                 "' is 10x10 8-bit 1-channel: expected an 8-bit grey 168x192 PGM like the first "
                 "image");
   TempDir empty;
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("yaleb:" + empty.path()); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("yaleb:" + empty.path()); }),
             "Yale B folder '" + empty.path() +
                 "' has no yaleBxx_P00A±aaaE±ee.pgm images (nor yaleBxx/ folders with them)");
 }
@@ -799,11 +801,11 @@ TEST(ImagesTest, Errors) {
   EXPECT_EQ(source->message_count(), 6u);
   source->Next();
   source->Next();
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "image '" + path +
                 "/b.jpg' is 21x10 8-bit 3-channel: expected 20x10 like the first "
                 "image of the folder");
-  EXPECT_EQ(ErrorOf([&] { source->Next(); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { source->Next(); }),
             "cannot decode image '" + path + "/c.png': expected a png, jpg, pgm, ppm or bmp image");
   EXPECT_FALSE(source->Next().has_value());
   DatasetOptions options;
@@ -811,7 +813,7 @@ TEST(ImagesTest, Errors) {
   WriteText(options.camera_info_path,
             "<?xml version=\"1.0\"?>\n<opencv_storage>\n"
             "<image_width>20</image_width></opencv_storage>\n");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(path, options); }),
             "calibration file '" + options.camera_info_path +
                 "': missing camera_matrix (or cameraMatrix, K) in OpenCV FileStorage file");
 }
@@ -859,7 +861,7 @@ TEST(VideoTest, MjpgAviFramesAtTheFileRate) {
 
   const std::string broken = dir.File("broken.mp4");
   WriteText(broken, "not a video");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(broken); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(broken); }),
             "cannot open video '" + broken +
                 "': expected a video file OpenCV can decode (e.g. MJPG .avi, H.264 .mp4)");
 }
@@ -875,23 +877,24 @@ TEST(DetectTest, KindsAndWhatWasLookedFor) {
   const std::string mcap = dir.File("log.MCAP");
   WriteText(mcap, "");
   EXPECT_EQ(DetectDatasetKind(mcap), "mcap");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(mcap); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(mcap); }),
             "'" + mcap + "' is an MCAP log: open it with the MCAP source, not as a dataset folder");
   const std::string text = dir.File("notes.txt");
   WriteText(text, "");
-  EXPECT_EQ(ErrorOf([&] { DetectDatasetKind(text); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { DetectDatasetKind(text); }),
             "no dataset kind for file '" + text +
                 "': expected a folder (tum, 7scenes, yaleb, images), a video file (avi, mp4, mkv, "
                 "mov, webm, m4v, mpg, mpeg, wmv) or an .mcap log");
   const std::string empty = dir.File("empty");
   std::filesystem::create_directories(empty);
-  EXPECT_EQ(ErrorOf([&] { DetectDatasetKind(empty); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { DetectDatasetKind(empty); }),
             "no dataset found in folder '" + empty +
                 "': looked for rgb.txt + depth.txt (tum), frame-XXXXXX.color.jpg|png (7scenes), "
                 "yaleBxx_P00A±aaaE±ee.pgm files or yaleBxx/ folders of them (yaleb), "
                 "png/jpg/jpeg/pgm/ppm/bmp files (images)");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(empty); }), ErrorOf([&] { DetectDatasetKind(empty); }));
-  EXPECT_EQ(ErrorOf([&] { DetectDatasetKind(dir.path() + "/absent"); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(empty); }),
+            ThrownMessage<DatasetError>([&] { DetectDatasetKind(empty); }));
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { DetectDatasetKind(dir.path() + "/absent"); }),
             "dataset path '" + dir.path() + "/absent' does not exist");
   // A 7-Scenes folder also holds images: the more specific kind wins, an explicit kind overrides.
   // (3 colour and 3 depth PNGs, 2 messages each).
@@ -903,28 +906,30 @@ TEST(DetectTest, KindsAndWhatWasLookedFor) {
 TEST(DetectTest, SpecsAndOptions) {
   TempDir dir;
   SevenScenesFolder seven(dir, 1);
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("bogus:" + seven.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("bogus:" + seven.path); }),
             "unknown dataset kind 'bogus' in 'bogus:" + seven.path +
                 "' (expected 7scenes, tum, yaleb, images or video)");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("tum:"); }), "dataset spec 'tum:' names no path");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("tum:" + seven.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("tum:"); }),
+            "dataset spec 'tum:' names no path");
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("tum:" + seven.path); }),
             "cannot read TUM list '" + seven.path + "/rgb.txt'");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("video:" + seven.path); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset("video:" + seven.path); }),
             "video path '" + seven.path + "' is a folder: expected a video file");
-  EXPECT_EQ(ErrorOf([&] { OpenDataset("7scenes:" + seven.path + "/frame-000000.pose.txt"); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>(
+                [&] { OpenDataset("7scenes:" + seven.path + "/frame-000000.pose.txt"); }),
             "7scenes dataset path '" + seven.path + "/frame-000000.pose.txt' is not a folder");
   DatasetOptions options;
   options.fps = 0;
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(seven.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(seven.path, options); }),
             "dataset option fps 0.000000 must be a positive number of frames per second");
   options = {};
   options.topic_prefix = "camera/";
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(seven.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(seven.path, options); }),
             "dataset option topic_prefix 'camera/' is not an absolute topic prefix (expected e.g. "
             "/camera: letters, digits, '_' and single '/', no trailing '/')");
   options = {};
   options.camera_frame_id = std::string(32, 'c');
-  EXPECT_EQ(ErrorOf([&] { OpenDataset(seven.path, options); }),
+  EXPECT_EQ(ThrownMessage<DatasetError>([&] { OpenDataset(seven.path, options); }),
             "dataset option camera_frame_id '" + options.camera_frame_id +
                 "' must have 1 to 31 characters");
 }

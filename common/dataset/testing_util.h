@@ -3,7 +3,6 @@
 
 #include <gtest/gtest.h>
 
-#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -29,16 +28,6 @@ inline std::vector<StreamMessage> Drain(Source& source) {
     messages.push_back(std::move(*message));
   }
   return messages;
-}
-
-// The what() of the DatasetError `action` throws, or "no error".
-inline std::string ErrorOf(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const DatasetError& e) {
-    return e.what();
-  }
-  return "no error";
 }
 
 template <class M>

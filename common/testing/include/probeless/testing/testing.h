@@ -1,6 +1,6 @@
-// Helpers shared by the probeless tests (target probeless_testing, header-only, tests only):
-// the message of a thrown exception, a temporary directory per test, whole text files, shell
-// command lines and child processes with their stdout and stderr captured.
+// Helpers shared by the probeless tests (target probeless_testing, header-only, tests only): a
+// temporary directory per test, whole text files, shell command lines and child processes with
+// their stdout and stderr captured. Assertions on thrown exceptions are in expect.h (included).
 #pragma once
 
 #include <fcntl.h>
@@ -12,7 +12,6 @@
 
 #include <chrono>
 #include <cstdlib>
-#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -26,13 +25,6 @@
 extern char** environ;
 
 namespace probeless::testing {
-
-// The message of the std::exception `f` throws, kNoException ("(no error)") if it returns
-// normally: ThrownMessage (expect.h) for callables of any return type.
-template <class Fn>
-std::string ErrorOf(Fn&& f) {
-  return ThrownMessage([&] { f(); });
-}
 
 // The whole file `path` as text ("" if it cannot be read).
 inline std::string ReadText(const std::filesystem::path& path) {
