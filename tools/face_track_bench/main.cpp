@@ -9,16 +9,18 @@
 // $PROBELESS_DATA or <source>/../shared/data, models/yunet_120x160.onnx), --haar-cascade PATH
 // (default opencv-data's frontal cascade).
 // Prints a table, or one JSON object with --json. Exit 2 on bad options.
+#include "probeless/node/main.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -86,7 +88,8 @@ int Coverage(bool json, const std::string& cache, int redetect_period, bool flow
       rgb.assign(cached.data, cached.data + cached.total() * 3);
       int in_view = 0;
       if (std::fscanf(text, "%lf %lf %lf %lf %d", &fx, &fy, &cx, &cy, &in_view) != 5) {
-        throw std::runtime_error(std::string(base) + ".txt: malformed");
+        throw InputError(std::string(base) +
+                         ".txt: malformed cache file (expected 'fx fy cx cy in_view' first)");
       }
       have_truth = in_view != 0;
       for (auto& p : truth) {
@@ -172,7 +175,7 @@ int Coverage(bool json, const std::string& cache, int redetect_period, bool flow
   return 0;
 }
 
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   int frames = 200;
   bool json = false, coverage = false, flow_tracking = true, clahe = true;
   int redetect_period = 10;
@@ -187,133 +190,118 @@ int main(int argc, char** argv) {
       "[--yunet-model PATH] [--haar-cascade PATH] [--json]\n"
       "       face_track_bench --coverage [--cache DIR] [--redetect-period N] [--no-flow] "
       "[--no-clahe] [--backend ...] [--json]\n";
-  try {
-    for (int i = 1; i < argc; ++i) {
-      if (!std::strcmp(argv[i], "-h") || !std::strcmp(argv[i], "--help")) {
-        std::printf("%s", kUsage);
-        return 0;
-      } else if (!std::strcmp(argv[i], "--json")) {
-        json = true;
-      } else if (!std::strcmp(argv[i], "--coverage")) {
-        coverage = true;
-      } else if (!std::strcmp(argv[i], "--no-flow")) {
-        flow_tracking = false;
-      } else if (!std::strcmp(argv[i], "--no-clahe")) {
-        clahe = false;
-      } else if (!std::strcmp(argv[i], "--cache") && i + 1 < argc) {
-        cache = argv[++i];
-      } else if (!std::strcmp(argv[i], "--redetect-period") && i + 1 < argc) {
-        redetect_period = probeless::parse::ParseInteger<int>(argv[i], argv[i + 1], 1);
-        ++i;
-      } else if (!std::strcmp(argv[i], "--backend") && i + 1 < argc) {
-        backend = argv[++i];
-        if (backend != "dlib" && backend != "yunet" && backend != "haar") {
-          std::fprintf(stderr,
-                       "[error] [face_track_bench] unknown --backend '%s' (dlib, yunet or haar)\n",
-                       backend.c_str());
-          return 2;
-        }
-        base.backend = ft::BackendFromName(backend);
-      } else if (!std::strcmp(argv[i], "--yunet-model") && i + 1 < argc) {
-        base.yunet_model_path = argv[++i];
-      } else if (!std::strcmp(argv[i], "--haar-cascade") && i + 1 < argc) {
-        base.haar_cascade_path = argv[++i];
-      } else if (!std::strcmp(argv[i], "--frames") && i + 1 < argc) {
-        frames = probeless::parse::ParseInteger<int>(argv[i], argv[i + 1], 10);
-        ++i;
-      } else {
-        std::fprintf(stderr, "[error] [face_track_bench] %s", kUsage);
-        return 2;
-      }
-    }
-  } catch (const probeless::parse::NumberError& e) {
-    std::fprintf(stderr, "[error] [face_track_bench] %s\n", e.what());
-    return 2;
-  }
-  if (coverage) {
-    try {
-      return Coverage(json, cache, redetect_period, flow_tracking, clahe, base, backend);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "[error] [face_track_bench] %s\n", e.what());
-      return 1;
-    }
-  }
-  try {
-    sim::Scenario scenario =
-        sim::LoadScenario(std::string(PROBELESS_SOURCE_TREE) + "/data/scenarios/face_orbit.yaml");
-    sim::Simulator simulator(scenario, 2);
-    std::vector<sim::SimFrame> rendered;
-    for (uint64_t i = 0; i < 4; ++i) rendered.push_back(simulator.Render(i));
-    const auto model = face_light::LoadModel(std::string(PROBELESS_SOURCE_TREE) +
-                                             "/data/face_light/default_model.txt");
-    ft::FaceSampler sampler(model);
-    ft::TrackerOptions options = base;
-    options.redetect_period = 1 << 30;  // steady state: tracking only
-    options.flow_tracking = flow_tracking;
-    options.clahe_clip_limit = clahe ? options.clahe_clip_limit : 0;
-    ft::FaceTracker tracker(options);
-    auto view = [&](int i) {
-      const auto& f = rendered[i % rendered.size()];
-      return ft::ImageView{f.rgb.data(), f.camera.width, f.camera.height,
-                           static_cast<size_t>(f.camera.width) * 3, ft::PixelFormat::kRgb};
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw node::UsageError(arg + " needs a value");
+      return argv[++i];
     };
-    const ft::Intrinsics k{525, 525, 319.5, 239.5};
-    // Full detections.
-    std::vector<double> full, steady, track_only, sample_only, region;
-    for (int i = 0; i < 10; ++i) {
-      tracker.Reset();
-      const auto t0 = Clock::now();
-      const auto t = tracker.Track(view(i), k);
-      full.push_back(Ms(t0, Clock::now()));
-      if (!t.found) throw std::runtime_error("no face in the face_orbit render");
-    }
-    for (int i = 0; i < frames; ++i) {
-      const auto t0 = Clock::now();
-      const auto t = tracker.Track(view(i), k);
-      const auto t1 = Clock::now();
-      if (!t.found) throw std::runtime_error("lost the face in the steady state");
-      const auto s = sampler.Sample(view(i), t);
-      const auto t2 = Clock::now();
-      track_only.push_back(Ms(t0, t1));
-      sample_only.push_back(Ms(t1, t2));
-      steady.push_back(Ms(t0, t2));
-    }
-    ft::TrackerOptions every = base;
-    every.redetect_period = 1;  // a region detection every frame
-    ft::FaceTracker redetecting(every);
-    redetecting.Track(view(0), k);
-    for (int i = 0; i < 20; ++i) {
-      const auto t0 = Clock::now();
-      redetecting.Track(view(i), k);
-      region.push_back(Ms(t0, Clock::now()));
-    }
-    const double period = 10;
-    const double amortised =
-        (Median(steady) * (period - 1) + Median(region) + Median(sample_only)) / period;
-    if (json) {
-      std::printf(
-          "{\"image\":\"640x480 rgb8 face_orbit render\",\"backend\":\"%s\",\"samples\":%d,"
-          "\"frames\":%d,\"flow_tracking\":%s,\"clahe\":%s,"
-          "\"full_detection_ms\":%.2f,\"region_detection_ms\":%.2f,"
-          "\"steady_track_ms\":%.2f,\"steady_sample_ms\":%.3f,\"steady_total_ms\":%.2f,"
-          "\"amortised_redetect10_ms\":%.2f}\n",
-          backend.c_str(), sampler.SampleCount(), frames, flow_tracking ? "true" : "false",
-          clahe ? "true" : "false", Median(full), Median(region), Median(track_only),
-          Median(sample_only), Median(steady), amortised);
+    if (arg == "-h" || arg == "--help") {
+      std::printf("%s", kUsage);
+      return 0;
+    } else if (arg == "--json") {
+      json = true;
+    } else if (arg == "--coverage") {
+      coverage = true;
+    } else if (arg == "--no-flow") {
+      flow_tracking = false;
+    } else if (arg == "--no-clahe") {
+      clahe = false;
+    } else if (arg == "--cache") {
+      cache = value();
+    } else if (arg == "--redetect-period") {
+      redetect_period = parse::ParseInteger<int>(arg, value(), 1);
+    } else if (arg == "--backend") {
+      backend = value();
+      if (backend != "dlib" && backend != "yunet" && backend != "haar") {
+        throw node::UsageError("--backend expects dlib, yunet or haar, got '" + backend + "'");
+      }
+      base.backend = ft::BackendFromName(backend);
+    } else if (arg == "--yunet-model") {
+      base.yunet_model_path = value();
+    } else if (arg == "--haar-cascade") {
+      base.haar_cascade_path = value();
+    } else if (arg == "--frames") {
+      frames = parse::ParseInteger<int>(arg, value(), 10);
     } else {
-      std::printf(
-          "face_track_bench: 640x480 rgb8, backend %s, %d samples, medians over %d frames\n",
-          backend.c_str(), sampler.SampleCount(), frames);
-      std::printf(
-          "  full detection     %7.2f ms\n  region detection   %7.2f ms\n"
-          "  steady: track      %7.2f ms\n  steady: sample     %7.3f ms\n"
-          "  steady: total      %7.2f ms\n  amortised (redetect every 10) %.2f ms\n",
-          Median(full), Median(region), Median(track_only), Median(sample_only), Median(steady),
-          amortised);
+      throw node::UsageError("unknown option '" + arg + "' (see --help)");
     }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [face_track_bench] %s\n", e.what());
-    return 1;
+  }
+  if (coverage) return Coverage(json, cache, redetect_period, flow_tracking, clahe, base, backend);
+  sim::Scenario scenario =
+      sim::LoadScenario(std::string(PROBELESS_SOURCE_TREE) + "/data/scenarios/face_orbit.yaml");
+  sim::Simulator simulator(scenario, 2);
+  std::vector<sim::SimFrame> rendered;
+  for (uint64_t i = 0; i < 4; ++i) rendered.push_back(simulator.Render(i));
+  const auto model = face_light::LoadModel(std::string(PROBELESS_SOURCE_TREE) +
+                                           "/data/face_light/default_model.txt");
+  ft::FaceSampler sampler(model);
+  ft::TrackerOptions options = base;
+  options.redetect_period = 1 << 30;  // steady state: tracking only
+  options.flow_tracking = flow_tracking;
+  options.clahe_clip_limit = clahe ? options.clahe_clip_limit : 0;
+  ft::FaceTracker tracker(options);
+  auto view = [&](int i) {
+    const auto& f = rendered[i % rendered.size()];
+    return ft::ImageView{f.rgb.data(), f.camera.width, f.camera.height,
+                         static_cast<size_t>(f.camera.width) * 3, ft::PixelFormat::kRgb};
+  };
+  const ft::Intrinsics k{525, 525, 319.5, 239.5};
+  // Full detections.
+  std::vector<double> full, steady, track_only, sample_only, region;
+  for (int i = 0; i < 10; ++i) {
+    tracker.Reset();
+    const auto t0 = Clock::now();
+    const auto t = tracker.Track(view(i), k);
+    full.push_back(Ms(t0, Clock::now()));
+    if (!t.found) throw std::runtime_error("no face in the face_orbit render");
+  }
+  for (int i = 0; i < frames; ++i) {
+    const auto t0 = Clock::now();
+    const auto t = tracker.Track(view(i), k);
+    const auto t1 = Clock::now();
+    if (!t.found) throw std::runtime_error("lost the face in the steady state");
+    const auto s = sampler.Sample(view(i), t);
+    const auto t2 = Clock::now();
+    track_only.push_back(Ms(t0, t1));
+    sample_only.push_back(Ms(t1, t2));
+    steady.push_back(Ms(t0, t2));
+  }
+  ft::TrackerOptions every = base;
+  every.redetect_period = 1;  // a region detection every frame
+  ft::FaceTracker redetecting(every);
+  redetecting.Track(view(0), k);
+  for (int i = 0; i < 20; ++i) {
+    const auto t0 = Clock::now();
+    redetecting.Track(view(i), k);
+    region.push_back(Ms(t0, Clock::now()));
+  }
+  const double period = 10;
+  const double amortised =
+      (Median(steady) * (period - 1) + Median(region) + Median(sample_only)) / period;
+  if (json) {
+    std::printf(
+        "{\"image\":\"640x480 rgb8 face_orbit render\",\"backend\":\"%s\",\"samples\":%d,"
+        "\"frames\":%d,\"flow_tracking\":%s,\"clahe\":%s,"
+        "\"full_detection_ms\":%.2f,\"region_detection_ms\":%.2f,"
+        "\"steady_track_ms\":%.2f,\"steady_sample_ms\":%.3f,\"steady_total_ms\":%.2f,"
+        "\"amortised_redetect10_ms\":%.2f}\n",
+        backend.c_str(), sampler.SampleCount(), frames, flow_tracking ? "true" : "false",
+        clahe ? "true" : "false", Median(full), Median(region), Median(track_only),
+        Median(sample_only), Median(steady), amortised);
+  } else {
+    std::printf("face_track_bench: 640x480 rgb8, backend %s, %d samples, medians over %d frames\n",
+                backend.c_str(), sampler.SampleCount(), frames);
+    std::printf(
+        "  full detection     %7.2f ms\n  region detection   %7.2f ms\n"
+        "  steady: track      %7.2f ms\n  steady: sample     %7.3f ms\n"
+        "  steady: total      %7.2f ms\n  amortised (redetect every 10) %.2f ms\n",
+        Median(full), Median(region), Median(track_only), Median(sample_only), Median(steady),
+        amortised);
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return node::RunMain("face_track_bench", [&] { return Run(argc, argv); });
 }

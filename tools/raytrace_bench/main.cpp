@@ -88,15 +88,18 @@ std::vector<float> ReadPfm(const std::string& path, int width, int height) {
   in >> magic >> w >> h >> scale;
   in.get();
   if (!in || magic != "PF" || w != width || h != height || scale >= 0) {
-    throw std::runtime_error("'" + path + "': not a little-endian RGB PFM of " +
-                             std::to_string(width) + "x" + std::to_string(height));
+    throw InputError("'" + path + "': not a little-endian RGB PFM of " + std::to_string(width) +
+                     "x" + std::to_string(height));
   }
   std::vector<float> rgb(3 * static_cast<size_t>(w) * h);
   for (int y = h - 1; y >= 0; --y) {
     in.read(reinterpret_cast<char*>(&rgb[3 * static_cast<size_t>(y) * w]),
             static_cast<std::streamsize>(3 * sizeof(float) * w));
   }
-  if (!in) throw std::runtime_error("'" + path + "': truncated");
+  if (!in) {
+    throw InputError("'" + path + "': truncated (expected " + std::to_string(width) + "x" +
+                     std::to_string(height) + " RGB floats)");
+  }
   return rgb;
 }
 
