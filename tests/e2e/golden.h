@@ -21,7 +21,10 @@ inline constexpr int kGoldenWidth = 160;
 inline constexpr int kBlockSize = 4;
 // Limits, in 8-bit levels (0..255) of the channel that differs most at each pixel.
 inline constexpr double kMaxMeanAbsDiff = 1.5;
-inline constexpr double kMaxBlockMeanAbsDiff = 6.0;
+// The block limit leaves room for the machine: Embree's and the dispatched kernels' ISA paths
+// (AVX2 or AVX-512) round differently and move a few pixels at a crisp shadow edge
+// (docs/replay.md).
+inline constexpr double kMaxBlockMeanAbsDiff = 10.0;
 
 struct ImageDiff {
   double mean_abs = 0;        // over every pixel (largest channel difference)
