@@ -24,34 +24,14 @@ import sys
 import numpy as np
 
 
-def basis(bands, d):
-    """Real SH basis of common/sh/sh.h (same recurrence and normalisation); d is (N, 3)."""
-    d = np.atleast_2d(d)
+def basis(d):
+    """Real SH of bands 0-2 of directions d (N, 3): the closed form of common/sh/sh.h (Condon-Shortley
+    phase, index l(l+1)+m), as tools/light_prior/fit_light_prior.py."""
     x, y, z = d[:, 0], d[:, 1], d[:, 2]
-    n = len(d)
-    out = np.zeros((n, bands * bands))
-    c, s, q_mm = np.ones(n), np.zeros(n), np.ones(n)
-    for m in range(bands):
-        if m > 0:
-            c, s = c * x - s * y, c * y + s * x
-            q_mm = q_mm * -(2 * m - 1)
-        q_prev2, q_prev = np.zeros(n), np.zeros(n)
-        for l in range(m, bands):
-            if l == m:
-                q = q_mm.copy()
-            elif l == m + 1:
-                q = z * (2 * m + 1) * q_prev
-            else:
-                q = ((2 * l - 1) * z * q_prev - (l + m - 1) * q_prev2) / (l - m)
-            k = math.sqrt((2 * l + 1) / (4 * math.pi) * math.factorial(l - m) / math.factorial(l + m))
-            v = (k * math.sqrt(2) if m > 0 else k) * q
-            if m == 0:
-                out[:, l * (l + 1)] = v
-            else:
-                out[:, l * (l + 1) + m] = v * c
-                out[:, l * (l + 1) - m] = v * s
-            q_prev2, q_prev = q_prev, q
-    return out
+    return np.stack([np.full_like(x, 0.28209479177), -0.48860251190 * y, 0.48860251190 * z,
+                     -0.48860251190 * x, 1.09254843059 * x * y, -1.09254843059 * y * z,
+                     0.31539156525 * (3 * z * z - 1), -1.09254843059 * x * z,
+                     0.54627421529 * (x * x - y * y)], 1)
 
 
 def fibonacci(n):
@@ -63,7 +43,7 @@ def fibonacci(n):
 
 
 DIRECTIONS = fibonacci(6000)
-BASIS = basis(3, DIRECTIONS)
+BASIS = basis(DIRECTIONS)
 
 
 def linear_direction(sh):

@@ -213,10 +213,7 @@ int Run(int argc, char** argv) {
       redetect_period = parse::ParseInteger<int>(arg, value(), 1);
     } else if (arg == "--backend") {
       backend = value();
-      if (backend != "dlib" && backend != "yunet" && backend != "haar") {
-        throw node::UsageError("--backend expects dlib, yunet or haar, got '" + backend + "'");
-      }
-      base.backend = ft::BackendFromName(backend);
+      base.backend = ft::BackendFromName(backend);  // FaceTrackError (an InputError) if unknown
     } else if (arg == "--yunet-model") {
       base.yunet_model_path = value();
     } else if (arg == "--haar-cascade") {
