@@ -27,7 +27,7 @@
 #include "probeless/face_light/model.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
-#include "probeless/parse/number.h"
+#include "probeless/node/flags.h"
 #include "probeless/sim/scenario.h"
 #include "probeless/sim/simulator.h"
 
@@ -185,45 +185,29 @@ int Run(int argc, char** argv) {
   base.yunet_model_path =
       (data && *data ? std::string(data) : std::string(PROBELESS_SOURCE_TREE) + "/../shared/data") +
       "/models/yunet_120x160.onnx";
-  constexpr const char* kUsage =
-      "usage: face_track_bench [--frames N] [--no-flow] [--no-clahe] [--backend dlib|yunet|haar] "
-      "[--yunet-model PATH] [--haar-cascade PATH] [--json]\n"
-      "       face_track_bench --coverage [--cache DIR] [--redetect-period N] [--no-flow] "
-      "[--no-clahe] [--backend ...] [--json]\n";
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError(arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "-h" || arg == "--help") {
-      std::printf("%s", kUsage);
-      return 0;
-    } else if (arg == "--json") {
-      json = true;
-    } else if (arg == "--coverage") {
-      coverage = true;
-    } else if (arg == "--no-flow") {
-      flow_tracking = false;
-    } else if (arg == "--no-clahe") {
-      clahe = false;
-    } else if (arg == "--cache") {
-      cache = value();
-    } else if (arg == "--redetect-period") {
-      redetect_period = parse::ParseInteger<int>(arg, value(), 1);
-    } else if (arg == "--backend") {
-      backend = value();
-      base.backend = ft::BackendFromName(backend);  // FaceTrackError (an InputError) if unknown
-    } else if (arg == "--yunet-model") {
-      base.yunet_model_path = value();
-    } else if (arg == "--haar-cascade") {
-      base.haar_cascade_path = value();
-    } else if (arg == "--frames") {
-      frames = parse::ParseInteger<int>(arg, value(), 10);
-    } else {
-      throw node::UsageError("unknown option '" + arg + "' (see --help)");
-    }
-  }
+  node::FlagParser flags(
+      "face_track_bench",
+      "milliseconds per 640 x 480 RGB frame of the face tracker on face_orbit frames (detection,\n"
+      "region re-detection, steady state), or with --coverage the tracker over the whole stream");
+  flags.Add("--frames", &frames, "N", "steady-state frames to time", 10);
+  flags.Add("--coverage", &coverage, "every face_orbit frame in order through one tracker");
+  flags.Add("--cache", &cache, "DIR", "--coverage: cache rendered frames here");
+  flags.Add("--redetect-period", &redetect_period, "N", "--coverage: tracker redetect period", 1);
+  flags.AddSwitch(
+      "--no-flow", [&] { flow_tracking = false; }, "without flow tracking");
+  flags.AddSwitch(
+      "--no-clahe", [&] { clahe = false; }, "clahe_clip_limit 0");
+  flags.AddCallback(
+      "--backend", "dlib|yunet|haar", "face detector",
+      [&](const std::string& name) {
+        backend = name;
+        base.backend = ft::BackendFromName(backend);  // FaceTrackError (an InputError) if unknown
+      },
+      backend);
+  flags.Add("--yunet-model", &base.yunet_model_path, "PATH", "YuNet model");
+  flags.Add("--haar-cascade", &base.haar_cascade_path, "PATH", "Haar cascade");
+  flags.Add("--json", &json, "one JSON object instead of a table");
+  if (!flags.Parse(argc, argv)) return 0;
   if (coverage) return Coverage(json, cache, redetect_period, flow_tracking, clahe, base, backend);
   sim::Scenario scenario =
       sim::LoadScenario(std::string(PROBELESS_SOURCE_TREE) + "/data/scenarios/face_orbit.yaml");
