@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "pathtrace_room.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "probeless/raytrace/pathtrace.h"
 #include "probeless/raytrace/render.h"
@@ -116,58 +117,33 @@ int Run(int argc, char** argv) {
   uint64_t pt_seed = 1;
   std::string json;
   std::string pt_image, pt_raw, pt_ref;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw probeless::node::UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::printf(
-          "usage: raytrace_bench [--scenario FILE] [--frames N] [--threads N] [--json OUT]\n"
-          "                      [--pt-spp N] [--pt-image OUT.ppm] [--no-pt] [--pt-only]\n"
-          "                      [--pt-size WxH] [--pt-seed S] [--pt-rr N] [--pt-raw OUT.pfm]\n"
-          "                      [--pt-ref REF.pfm]\n");
-      return 0;
-    } else if (a == "--scenario") {
-      scenario_path = value();
-    } else if (a == "--frames") {
-      frames = parse::ParseInteger<int>(a, value(), 1);
-    } else if (a == "--threads") {
-      threads = parse::ParseInteger<int>(a, value(), 1);
-    } else if (a == "--json") {
-      json = value();
-    } else if (a == "--pt-spp") {
-      pt_spp = parse::ParseInteger<int>(a, value(), 1);
-    } else if (a == "--pt-image") {
-      pt_image = value();
-    } else if (a == "--no-pt") {
-      pathtrace = false;
-    } else if (a == "--pt-only") {
-      pt_only = true;
-    } else if (a == "--pt-size") {
-      const std::string v = value();
-      const size_t x = v.find('x');
-      if (x == std::string::npos)
-        throw probeless::node::UsageError("--pt-size expects WxH, got " + v);
-      pt_width = parse::ParseInteger<int>(a, v.substr(0, x), 1);
-      pt_height = parse::ParseInteger<int>(a, v.substr(x + 1), 1);
-    } else if (a == "--pt-seed") {
-      pt_seed = parse::ParseInteger<uint64_t>(a, value(), 0);
-    } else if (a == "--pt-rr") {
-      pt_rr = parse::ParseInteger<int>(a, value(), 0);
-    } else if (a == "--pt-raw") {
-      pt_raw = value();
-    } else if (a == "--pt-ref") {
-      pt_ref = value();
-    } else {
-      throw probeless::node::UsageError(
-          "unknown option '" + a +
-          "' (expected --scenario, --frames, --threads, --json, --pt-spp, "
-          "--pt-image, --no-pt, --pt-only, --pt-size, --pt-seed, --pt-rr, "
-          "--pt-raw, --pt-ref)");
-    }
-  }
+  probeless::node::FlagParser flags(
+      "raytrace_bench",
+      "speed of the ray tracer and the simulator: simulator frames, the renderer alone, batched\n"
+      "closest-hit and occlusion queries, one path-traced frame of the furnished room");
+  flags.Add("--scenario", &scenario_path, "FILE.yaml", "the scenario of rows 1-4");
+  flags.Add("--frames", &frames, "N", "simulator frames", 1);
+  flags.Add("--threads", &threads, "N", "render threads", 1);
+  flags.Add("--json", &json, "OUT", "write the figures as JSON");
+  flags.Add("--pt-spp", &pt_spp, "N", "paths per pixel of the path trace", 1);
+  flags.Add("--pt-image", &pt_image, "OUT.ppm", "write the path-traced image");
+  flags.AddSwitch(
+      "--no-pt", [&] { pathtrace = false; }, "skip the path trace");
+  flags.Add("--pt-only", &pt_only, "only the path trace (skip rows 1-4)");
+  flags.AddCallback("--pt-size", "WxH", "path-trace size (default: the room camera's 640x480)",
+                    [&](const std::string& v) {
+                      const size_t x = v.find('x');
+                      if (x == std::string::npos)
+                        throw probeless::node::UsageError("--pt-size expects WxH, got " + v);
+                      pt_width = parse::ParseInteger<int>("--pt-size", v.substr(0, x), 1);
+                      pt_height = parse::ParseInteger<int>("--pt-size", v.substr(x + 1), 1);
+                    });
+  flags.Add("--pt-seed", &pt_seed, "S", "path-trace seed", 0);
+  flags.Add("--pt-rr", &pt_rr, "N",
+            "Russian roulette after N bounces (-1: PathTraceOptions default)", 0);
+  flags.Add("--pt-raw", &pt_raw, "OUT.pfm", "write the path trace's linear RGB");
+  flags.Add("--pt-ref", &pt_ref, "REF.pfm", "rms error of the path trace against this reference");
+  if (!flags.Parse(argc, argv)) return 0;
   if (frames < 1 || threads < 1 || pt_spp < 1) {
     throw probeless::node::UsageError("--frames, --threads and --pt-spp must be >= 1");
   }

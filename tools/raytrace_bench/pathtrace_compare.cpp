@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/node/flags.h"
 #include "probeless/node/main.h"
 #include "probeless/parse/number.h"
 #include "probeless/raytrace/pathtrace.h"
@@ -178,28 +179,14 @@ void WritePfm(const std::string& path, const Frame& f) {
 int Run(int argc, char** argv) {
   std::string dir, which = "interior";
   int spp = 256, bounces = 3;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw probeless::node::UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::printf("usage: pathtrace_compare --out DIR [--scene NAME] [--spp N] [--bounces N]\n");
-      return 0;
-    } else if (a == "--out") {
-      dir = value();
-    } else if (a == "--scene") {
-      which = value();
-    } else if (a == "--spp") {
-      spp = probeless::parse::ParseInteger<int>(a, value(), 1);
-    } else if (a == "--bounces") {
-      bounces = probeless::parse::ParseInteger<int>(a, value(), 0);
-    } else {
-      throw probeless::node::UsageError("unknown option '" + a +
-                                        "' (expected --out, --scene, --spp, --bounces)");
-    }
-  }
+  probeless::node::FlagParser flags(
+      "pathtrace_compare",
+      "exports a scene for an independent renderer (Mitsuba 3) and renders it with PathTrace");
+  flags.Add("--out", &dir, "DIR", "scene.json, the objects' .obj and probeless.pfm (required)");
+  flags.AddChoice("--scene", &which, {"interior", "outdoor"}, "the scene");
+  flags.Add("--spp", &spp, "N", "paths per pixel", 1);
+  flags.Add("--bounces", &bounces, "N", "maximum bounces", 0);
+  if (!flags.Parse(argc, argv)) return 0;
   if (dir.empty()) throw probeless::node::UsageError("--out DIR is required");
   CompareScene c;
   if (which == "interior") {
