@@ -34,6 +34,7 @@
 
 #include "control.h"
 #include "probeless/bus/bus.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "report.h"
 #include "roudi.h"
@@ -838,23 +839,11 @@ std::vector<std::string> ShmEntries(const std::string& prefix) {
   return names;
 }
 
-void PrintUsage() {
-  std::printf(
-      "usage: bus_bench [--json FILE] [--full | --smoke] [--transports probeless,uds,iceoryx]\n"
-      "                 [--sizes B,B,...] [--no-pin] [--rt]\n"
-      "One-way latency (p50/p90/p99/p99.9/max) and throughput of the probeless bus, a Unix\n"
-      "domain socket and iceoryx (a private iox-roudi is started) between processes.\n"
-      "  default   1->1 blocking+busy, payload written or not, 1 KB..4 MB; 1->3; a slow\n"
-      "            subscriber; 4 RGB-D streams at 30 fps to 3 subscribers for 3 s (< 45 s)\n"
-      "  --full    11 sizes, 2000-5000 samples per row, more 1->3 sizes (~8 minutes)\n"
-      "  --smoke   a < 5 s subset (ctest)\n"
-      "  --json F  also write the rows as a JSON array to F\n"
-      "  --transports T,…  transports to run (default all three)\n"
-      "  --sizes B,…       payload sizes in bytes of the 1->1 sweep\n"
-      "  --no-pin  do not pin the publisher/subscriber to cores\n"
-      "  --rt      run publishers and blocking subscribers SCHED_FIFO (busy-poll subscribers\n"
-      "            nice -20): figures of the transports, not of the competing load\n");
-}
+constexpr char kDescription[] =
+    "One-way latency (p50/p90/p99/p99.9/max) and throughput of the probeless bus, a Unix\n"
+    "domain socket and iceoryx (a private iox-roudi is started) between processes. By default:\n"
+    "1->1 blocking+busy, payload written or not, 1 KB..4 MB; 1->3; a slow subscriber; 4 RGB-D\n"
+    "streams at 30 fps to 3 subscribers for 3 s (< 45 s).";
 
 std::vector<std::string> Split(const std::string& s) {
   std::vector<std::string> out;
@@ -887,39 +876,22 @@ int Main(int argc, char** argv) {
   int ctl_fd = -1;
   uint32_t index = 0;
   bool full = false, smoke = false, pin = true, realtime = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError(arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "--json") {
-      json_path = value();
-    } else if (arg == "--full") {
-      full = true;
-    } else if (arg == "--smoke") {
-      smoke = true;
-    } else if (arg == "--no-pin") {
-      pin = false;
-    } else if (arg == "--rt") {
-      realtime = true;
-    } else if (arg == "--transports") {
-      transports_arg = value();
-    } else if (arg == "--sizes") {
-      sizes_arg = value();
-    } else if (arg == "--role") {
-      role = value();
-    } else if (arg == "--ctl-fd") {
-      ctl_fd = parse::ParseInteger<int>(arg, value(), 0);
-    } else if (arg == "--index") {
-      index = parse::ParseInteger<uint32_t>(arg, value());
-    } else if (arg == "-h" || arg == "--help") {
-      PrintUsage();
-      return 0;
-    } else {
-      throw node::UsageError("unknown argument '" + arg + "' (see --help)");
-    }
-  }
+  node::FlagParser flags("bus_bench", kDescription);
+  flags.Add("--json", &json_path, "FILE", "also write the rows as a JSON array to FILE");
+  flags.Add("--full", &full, "11 sizes, 2000-5000 samples per row, more 1->3 sizes (~8 minutes)");
+  flags.Add("--smoke", &smoke, "a < 5 s subset (ctest)");
+  flags.Add("--transports", &transports_arg, "T,...",
+            "transports to run: probeless,uds,iceoryx (default all three)");
+  flags.Add("--sizes", &sizes_arg, "B,...", "payload sizes in bytes of the 1->1 sweep");
+  flags.AddSwitch(
+      "--no-pin", [&] { pin = false; }, "do not pin the publisher/subscriber to cores");
+  flags.Add("--rt", &realtime,
+            "run publishers and blocking subscribers SCHED_FIFO (busy-poll subscribers nice "
+            "-20): figures of the transports, not of the competing load");
+  flags.Add("--role", &role, "pub|sub", "internal: a child process of the orchestrator");
+  flags.Add("--ctl-fd", &ctl_fd, "FD", "internal: the control block's descriptor", 0);
+  flags.Add("--index", &index, "I", "internal: the child's index");
+  if (!flags.Parse(argc, argv)) return 0;
   if (!role.empty()) return RunRole(role, ctl_fd, index);
   if (full && smoke) throw node::UsageError("--full and --smoke exclude each other");
 

@@ -65,6 +65,7 @@
 #include "probeless/log/mcap.h"
 #include "probeless/log/mcap_writer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/flags.h"
 #include "probeless/replay/sources.h"
 
 extern char** environ;
@@ -76,13 +77,11 @@ using namespace probeless;
 using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
-constexpr char kUsage[] =
-    "usage: graph_bench [--source PATH] [--duration S] [--live | --lockstep] [--json FILE]\n"
-    "                   [--timeline FILE] [--work DIR] [--delay S] [--arg NAME:=VALUE ...]\n"
+constexpr char kDescription[] =
     "The scene graph of launch/replay.yaml (player -> rectify -> fusion -> scene_light ->\n"
     "renderer -> recorder) on a 7-Scenes log, live and in lock-step: per node frames, drops,\n"
     "CPU, processing time; camera -> /scene/light and -> /render/composite latency\n"
-    "(docs/benchmarks/graph.md).\n";
+    "(docs/benchmarks/graph.md).";
 
 struct Options {
   bool face = false;  // --graph face
@@ -97,52 +96,36 @@ struct Options {
   std::vector<std::string> launch_args;
 };
 
-Options ParseOptions(int argc, char** argv) {
+// The options of the command line; nothing after --help (the usage is printed).
+std::optional<Options> ParseOptions(int argc, char** argv) {
   Options o;
   bool only_live = false, only_lockstep = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::fputs(kUsage, stdout);
-      std::exit(0);
-    } else if (a == "--graph") {
-      const std::string graph = value();
-      if (graph != "scene" && graph != "face") {
-        throw node::UsageError("--graph expects scene or face, got '" + graph + "'");
-      }
-      o.face = graph == "face";
-    } else if (a == "--source") {
-      o.source = value();
-    } else if (a == "--duration") {
-      o.duration_s = node::ParseNumberOption(a, value());
-      if (!(o.duration_s > 0)) throw node::UsageError("--duration expects seconds > 0");
-    } else if (a == "--delay") {
-      o.delay_s = node::ParseNumberOption(a, value());
-      if (!(o.delay_s >= 0)) throw node::UsageError("--delay expects seconds >= 0");
-    } else if (a == "--live") {
-      only_live = true;
-    } else if (a == "--lockstep") {
-      only_lockstep = true;
-    } else if (a == "--json") {
-      o.json_path = value();
-    } else if (a == "--timeline") {
-      o.timeline_path = value();
-    } else if (a == "--work") {
-      o.work = value();
-    } else if (a == "--arg") {
-      const std::string arg = value();
-      if (arg.find(":=") == std::string::npos || arg.starts_with(":=")) {
-        throw node::UsageError("--arg expects NAME:=VALUE, got '" + arg + "'");
-      }
-      o.launch_args.push_back(arg);
-    } else {
-      throw node::UsageError("unknown option '" + a + "' (see --help)");
-    }
-  }
+  std::string graph = "scene";
+  node::FlagParser flags("graph_bench", kDescription);
+  flags.AddChoice("--graph", &graph, {"scene", "face"},
+                  "the scene graph on a 7-Scenes log, or the face graph on face_orbit");
+  flags.Add("--source", &o.source, "PATH",
+            "a 7-Scenes folder or an MCAP log (default: $PROBELESS_DATA/7scenes-redkitchen)");
+  flags.Add("--duration", &o.duration_s, "S", "seconds of playing per run");
+  flags.Add("--live", &only_live, "only the live run (default both)");
+  flags.Add("--lockstep", &only_lockstep, "only the lock-step run (default both)");
+  flags.Add("--json", &o.json_path, "FILE", "write the figures as JSON");
+  flags.Add("--timeline", &o.timeline_path, "FILE",
+            "every handler call of every node of the first run, for plot_timeline.py");
+  flags.Add("--work", &o.work, "DIR",
+            "keep the logs, recordings and statistics there (default: a temporary folder)");
+  flags.Add("--delay", &o.delay_s, "S", "seconds the player waits before playing");
+  flags.AddCallback("--arg", "NAME:=VALUE", "one more replay.yaml argument (repeatable)",
+                    [&](const std::string& arg) {
+                      if (arg.find(":=") == std::string::npos || arg.starts_with(":=")) {
+                        throw node::UsageError("--arg expects NAME:=VALUE, got '" + arg + "'");
+                      }
+                      o.launch_args.push_back(arg);
+                    });
+  if (!flags.Parse(argc, argv)) return std::nullopt;
+  o.face = graph == "face";
+  if (!(o.duration_s > 0)) throw node::UsageError("--duration expects seconds > 0");
+  if (!(o.delay_s >= 0)) throw node::UsageError("--delay expects seconds >= 0");
   if (only_live && only_lockstep)
     throw node::UsageError("--live and --lockstep exclude each other");
   if (only_live) o.lockstep = false;
@@ -585,7 +568,9 @@ void PrintRun(const json& run) {
 }
 
 int Run(int argc, char** argv) {
-  const Options o = ParseOptions(argc, argv);
+  const std::optional<Options> parsed = ParseOptions(argc, argv);
+  if (!parsed) return 0;
+  const Options& o = *parsed;
   // A bus domain of our own: the graph never meets another run's topics.
   const std::string domain = "graph_bench_" + std::to_string(getpid());
   setenv("PROBELESS_DOMAIN", domain.c_str(), 1);
