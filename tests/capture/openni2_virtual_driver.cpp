@@ -7,7 +7,10 @@
 // 640x480 @ 30 Hz. Frame n: depth(x, y) = 800 + 2 x + y + n (mm; 0 in the 8x8 top-left corner),
 // colour(x, y) = (x & 255, y & 255, n & 255). Fields of view 58 x 45 degrees.
 // Env: PROBELESS_VIRTUAL_NO_REGISTRATION=1 hides hardware registration (software path);
-// PROBELESS_VIRTUAL_FRAMES=N stops delivering after N frames per stream (a stalled device).
+// PROBELESS_VIRTUAL_FRAMES=N stops delivering after N frames per stream (a stalled device);
+// PROBELESS_VIRTUAL_STRAY_THREAD=1 starts a thread that shutdown() leaves running in this
+// library, as Debian's PS1080/PSLink drivers do when their udev thread is late (unloading the
+// driver under it then crashes the process).
 #include <Driver/OniDriverAPI.h>
 
 #include <atomic>
@@ -219,6 +222,13 @@ class VirtualDriver : public oni::driver::DriverBase {
     std::strncpy(info_.vendor, "probeless", sizeof(info_.vendor) - 1);
     std::strncpy(info_.name, "Virtual RGB-D", sizeof(info_.name) - 1);
     deviceConnected(&info_);
+    if (std::getenv("PROBELESS_VIRTUAL_STRAY_THREAD") != nullptr) {
+      static std::atomic<uint64_t> spins{0};
+      std::thread([] {
+        for (;;) spins.fetch_add(1, std::memory_order_relaxed);  // runs this library's code
+      }).detach();
+      while (spins.load() == 0) std::this_thread::yield();  // it is running before we return
+    }
     return ONI_STATUS_OK;
   }
   oni::driver::DeviceBase* deviceOpen(const char* uri, const char*) override {

@@ -21,18 +21,28 @@ std::string LastError() {
   return e.empty() ? "no detail" : e;
 }
 
-// OpenNI::initialize/shutdown are process-wide; one device at a time holds them.
-class OpenNiRuntime {
- public:
-  OpenNiRuntime() {
+// OpenNI2 is initialised once per process and never shut down. Shutting it down unloads the USB
+// drivers (PS1080, PSLink), which first wait 2 s for their udev thread and then cancel it and
+// dlclose the library it runs in: on a loaded machine that thread is late and the process dies
+// with SIGSEGV after its error was reported. Those threads also deliver hot-plug events, so a
+// retry sees a newly plugged device without re-initialising. A failed initialisation is retried
+// by the next call (the static stays uninitialised when the lambda throws).
+void EnsureOpenNiInitialised() {
+  static const bool initialised = [] {
     if (openni::OpenNI::initialize() != openni::STATUS_OK) {
       throw CaptureError(ErrorKind::kDeviceError,
                          "OpenNI2 does not initialise: " + LastError() +
                              " (drivers in /usr/lib/x86_64-linux-gnu/OpenNI2/Drivers, "
                              "/etc/openni2/OpenNI.ini)");
     }
-  }
-  ~OpenNiRuntime() { openni::OpenNI::shutdown(); }
+    return true;
+  }();
+  (void)initialised;
+}
+
+// Constructed first in the device so that OpenNI2 is up before any openni:: member is made.
+struct OpenNiRuntime {
+  OpenNiRuntime() { EnsureOpenNiInitialised(); }
 };
 
 class OpenNi2Device final : public Device {
@@ -269,7 +279,7 @@ class OpenNi2Device final : public Device {
     return k;
   }
 
-  OpenNiRuntime runtime_;  // first member: initialised before, shut down after everything else
+  OpenNiRuntime runtime_;  // first member: OpenNI2 is initialised before the other members
   OpenNi2Options options_;
   std::string description_;
   openni::Device device_;
