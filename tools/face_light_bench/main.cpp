@@ -2,19 +2,20 @@
 // deterministic synthetic frames (fixed seed), per estimator mode; median of repeated batches.
 //
 //   face_light_bench [--model MODEL] [--frames N] [--json FILE] [--case NAME]
+#include "probeless/node/main.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
-#include <iostream>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "probeless/face_light/estimator.h"
 #include "probeless/face_light/model.h"
-#include "probeless/parse/number.h"
+#include "probeless/node/flags.h"
 
 namespace fl = probeless::face_light;
 
@@ -35,36 +36,15 @@ int Run(int argc, char** argv) {
   std::string json_path;
   std::string only_case;
   int frames = 2000;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "-h" || flag == "--help") {
-      std::cout
-          << "usage: face_light_bench [--model MODEL] [--frames N] [--json FILE] [--case NAME]\n";
-      return 0;
-    }
-    if (i + 1 >= argc) {
-      std::cerr << "face_light_bench: " << flag << " needs a value (or is unknown)\n";
-      return 2;
-    }
-    const std::string value = argv[++i];
-    if (flag == "--model") {
-      model_path = value;
-    } else if (flag == "--frames") {
-      frames = probeless::parse::TryParseInteger<int>(value, 1).value_or(0);
-      if (frames == 0) {
-        std::cerr << "face_light_bench: --frames expects a positive integer, got '" << value
-                  << "'\n";
-        return 2;
-      }
-    } else if (flag == "--json") {
-      json_path = value;
-    } else if (flag == "--case") {
-      only_case = value;
-    } else {
-      std::cerr << "face_light_bench: unknown option " << flag << "\n";
-      return 2;
-    }
-  }
+  probeless::node::FlagParser flags(
+      "face_light_bench",
+      "nanoseconds per light estimate for a model over deterministic synthetic frames (fixed\n"
+      "seed), per estimator mode; median of repeated batches");
+  flags.Add("--model", &model_path, "MODEL", "the face light model");
+  flags.Add("--frames", &frames, "N", "estimates timed per mode (batches of 64)", 1);
+  flags.Add("--json", &json_path, "FILE", "also write the figures as JSON");
+  flags.Add("--case", &only_case, "NAME", "only this estimator mode");
+  if (!flags.Parse(argc, argv)) return 0;
   const fl::FaceLightModel model = fl::LoadModel(model_path);
   const int n = model.SampleCount();
   // Synthetic frames: a random light rendered through the RTFs plus noise, as linear intensities.
@@ -190,10 +170,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "face_light_bench: %s\n", error.what());
-    return 1;
-  }
+  return probeless::node::RunMain("face_light_bench", [&] { return Run(argc, argv); });
 }

@@ -7,6 +7,8 @@
 //                   --json OUT
 //                   [--plots DIR] [--ridge X] [--back-prior X] [--robust] [--robust-threshold X]
 //                   [--non-negative] [--weight-floor X]
+#include "probeless/node/main.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -28,6 +30,7 @@
 #include "probeless/face_light/yaleb.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "probeless/sh/sh.h"
 
@@ -38,29 +41,11 @@ namespace {
 
 constexpr double kDeg = 180 / std::numbers::pi;
 
-constexpr const char* kUsage =
-    "usage: face_light_eval --model MODEL --yaleb DIR|--synthetic DIR [--subjects LIST]\n"
-    "                       [--landmarks aligned|tracker] [--head-pose none|tracker]\n"
-    "                       --json OUT [--plots DIR] [estimator options]\n"
-    "  --synthetic DIR       a `sim --yaleb-style` folder instead of --yaleb; with --rgb images\n"
-    "                        (.ppm) the JSON adds colour_angle_deg_mean (docs/sim.md)\n"
-    "  --subjects LIST       test subjects (default: every subject in DIR the model was not\n"
-    "                        trained on); a training subject is an error\n"
-    "  --landmarks aligned|tracker  sample positions on the crop as it is (aligned, default), or\n"
-    "                        mapped onto each subject by the face tracker's landmarks on its\n"
-    "                        frontal-lit image, as the pipeline samples (tracker; train the\n"
-    "                        model with rtf_train --align tracker)\n"
-    "  --head-pose tracker   rotate each estimate from the face frame into the camera frame by\n"
-    "                        the subject's head rotation relative to the training subjects' mean,\n"
-    "                        from the face tracker on its frontal-lit image (default: none)\n"
-    "  --train-yaleb DIR     with --head-pose tracker: the Yale B folder of the model's training\n"
-    "                        subjects (default: the --yaleb folder)\n"
-    "  --plots DIR           write azimuth/elevation scatter plots and lat-long maps (PNG)\n"
-    "  estimator options: --ridge X --back-prior X --robust --robust-threshold X\n"
-    "                     --non-negative --weight-floor X --linear-direction\n"
-    "                     --directional-grid N --directional-iterations N --no-ambient\n"
-    "                     --no-direction-rtfs --direction-ridge X --directional-robust K\n"
-    "                     (docs/face_light.md)\n";
+constexpr const char* kDescription =
+    "estimates the light of every Extended Yale B light image of subjects the model was not\n"
+    "trained on and compares its direction with the file name's azimuth and elevation (Knorr &\n"
+    "Kurz 2014, sec. 5.1); --model, --yaleb (or --synthetic) and --json are required. Estimator\n"
+    "options: docs/face_light.md.";
 
 struct Result {
   int subject = 0;
@@ -69,13 +54,6 @@ struct Result {
   double angular_error = 0;                     // degrees
   double microseconds = 0;
 };
-
-double ParseNumber(const std::string& flag, const std::string& text) {
-  // parse::'s rules: strtod also took "inf", "nan" and hexadecimal.
-  const auto value = probeless::parse::TryParseDouble(text);
-  if (!value) throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
-  return *value;
-}
 
 double Mean(const std::vector<double>& v) {
   double sum = 0;
@@ -359,78 +337,69 @@ int Run(int argc, char** argv) {
   std::string train_yaleb;  // where the training subjects' images are (--head-pose tracker)
   fl::EstimatorOptions options;
   bool synthetic = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "-h" || flag == "--help") {
-      std::cout << kUsage;
-      return 0;
-    }
-    if (flag == "--robust") {
-      options.robust = true;
-      continue;
-    }
-    if (flag == "--non-negative") {
-      options.non_negative = true;
-      continue;
-    }
-    if (flag == "--linear-direction") {  // Sloan's optimal linear direction (the paper)
-      options.directional_fit = false;
-      continue;
-    }
-    if (flag == "--no-ambient") {
-      options.directional_ambient = false;
-      continue;
-    }
-    if (flag == "--no-direction-rtfs") {
-      options.use_direction_rtfs = false;
-      continue;
-    }
-    if (i + 1 >= argc) {
-      std::cerr << "face_light_eval: " << flag << " needs a value (or is unknown)\n" << kUsage;
-      return 2;
-    }
-    const std::string value = argv[++i];
-    if (flag == "--model") {
-      model_path = value;
-    } else if (flag == "--yaleb" || flag == "--synthetic") {
-      yaleb = value;
-      synthetic = flag == "--synthetic";
-    } else if (flag == "--train-yaleb") {
-      train_yaleb = value;
-    } else if (flag == "--subjects") {
-      subjects_text = value;
-    } else if (flag == "--landmarks") {
-      landmarks = value;
-    } else if (flag == "--head-pose") {
-      head_pose = value;
-    } else if (flag == "--json") {
-      json_path = value;
-    } else if (flag == "--plots") {
-      plots = value;
-    } else if (flag == "--ridge") {
-      options.ridge = ParseNumber(flag, value);
-    } else if (flag == "--back-prior") {
-      options.back_prior = ParseNumber(flag, value);
-    } else if (flag == "--robust-threshold") {
-      options.robust_threshold = ParseNumber(flag, value);
-    } else if (flag == "--weight-floor") {
-      options.weight_floor = ParseNumber(flag, value);
-    } else if (flag == "--directional-grid") {
-      options.directional_grid = static_cast<int>(ParseNumber(flag, value));
-    } else if (flag == "--directional-iterations") {
-      options.directional_iterations = static_cast<int>(ParseNumber(flag, value));
-    } else if (flag == "--directional-robust") {
-      options.directional_robust = ParseNumber(flag, value);
-    } else if (flag == "--direction-ridge") {
-      options.direction_ridge = ParseNumber(flag, value);
-    } else {
-      std::cerr << "face_light_eval: unknown option " << flag << "\n" << kUsage;
-      return 2;
-    }
-  }
+  // An integer option given as any number, truncated (as it always was).
+  auto truncated = [](int* target, const std::string& flag) {
+    return [target, flag](const std::string& text) {
+      *target = static_cast<int>(probeless::parse::ParseDouble(flag, text));
+    };
+  };
+  probeless::node::FlagParser flags("face_light_eval", kDescription);
+  flags.Add("--model", &model_path, "MODEL", "the face light model (rtf_train --out)");
+  flags.AddCallback("--yaleb", "DIR", "the Extended Yale B folder", [&](const std::string& v) {
+    yaleb = v;
+    synthetic = false;
+  });
+  flags.AddCallback(
+      "--synthetic", "DIR",
+      "a `sim --yaleb-style` folder instead of --yaleb; with --rgb images (.ppm) the JSON adds "
+      "colour_angle_deg_mean (docs/sim.md)",
+      [&](const std::string& v) {
+        yaleb = v;
+        synthetic = true;
+      });
+  flags.Add("--subjects", &subjects_text, "LIST",
+            "test subjects (default: every subject in DIR the model was not trained on); a "
+            "training subject is an error");
+  flags.Add("--landmarks", &landmarks, "aligned|tracker",
+            "sample positions on the crop as it is (aligned), or mapped onto each subject by the "
+            "face tracker's landmarks on its frontal-lit image (tracker; train the model with "
+            "rtf_train --align tracker)");
+  flags.Add("--head-pose", &head_pose, "none|tracker",
+            "tracker: rotate each estimate from the face frame into the camera frame by the "
+            "subject's head rotation relative to the training subjects' mean");
+  flags.Add("--train-yaleb", &train_yaleb, "DIR",
+            "with --head-pose tracker: the Yale B folder of the model's training subjects "
+            "(default: the --yaleb folder)");
+  flags.Add("--json", &json_path, "OUT", "write the figures as JSON");
+  flags.Add("--plots", &plots, "DIR",
+            "write azimuth/elevation scatter plots and lat-long maps (PNG)");
+  flags.Add("--ridge", &options.ridge, "X", "estimator: ridge");
+  flags.Add("--back-prior", &options.back_prior, "X", "estimator: back-hemisphere prior");
+  flags.Add("--robust", &options.robust, "estimator: drop outlier samples and re-solve");
+  flags.Add("--robust-threshold", &options.robust_threshold, "X", "estimator: outlier threshold");
+  flags.Add("--non-negative", &options.non_negative, "estimator: non-negative light");
+  flags.Add("--weight-floor", &options.weight_floor, "X", "estimator: sample weight floor");
+  flags.AddSwitch(
+      "--linear-direction", [&] { options.directional_fit = false; },
+      "estimator: Sloan's optimal linear direction (the paper)");
+  flags.AddCallback("--directional-grid", "N", "estimator: start directions",
+                    truncated(&options.directional_grid, "--directional-grid"),
+                    std::to_string(options.directional_grid));
+  flags.AddCallback("--directional-iterations", "N", "estimator: Newton iterations",
+                    truncated(&options.directional_iterations, "--directional-iterations"),
+                    std::to_string(options.directional_iterations));
+  flags.AddSwitch(
+      "--no-ambient", [&] { options.directional_ambient = false; },
+      "estimator: no ambient term in the directional fit");
+  flags.AddSwitch(
+      "--no-direction-rtfs", [&] { options.use_direction_rtfs = false; },
+      "estimator: without the direction RTFs");
+  flags.Add("--directional-robust", &options.directional_robust, "K",
+            "estimator: robust scale of the directional fit");
+  flags.Add("--direction-ridge", &options.direction_ridge, "X", "estimator: direction ridge");
+  if (!flags.Parse(argc, argv)) return 0;
   if (model_path.empty() || yaleb.empty() || json_path.empty()) {
-    std::cerr << "face_light_eval: --model, --yaleb and --json are required\n" << kUsage;
-    return 2;
+    throw probeless::node::UsageError("--model, --yaleb and --json are required (see --help)");
   }
   if (landmarks != "aligned" && landmarks != "tracker") {
     throw fl::FaceLightError("--landmarks '" + landmarks +
@@ -641,10 +610,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "face_light_eval: %s\n", error.what());
-    return 1;
-  }
+  return probeless::node::RunMain("face_light_eval", [&] { return Run(argc, argv); });
 }

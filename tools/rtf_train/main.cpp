@@ -6,7 +6,10 @@
 //             [--intensity-exponent G] [--grid-step PX] [--direction-bands B]
 //             [--direction-ridge X] [--align none|tracker] --out MODEL
 //
-// Progress goes to stderr; errors are one line on stderr and exit code 1 (2 for usage errors).
+// Progress goes to stderr; errors are one line on stderr (node::RunMain: exit code 2 for bad input,
+// 1 otherwise).
+#include "probeless/node/main.h"
+
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -19,6 +22,7 @@
 #include "probeless/face_light/yaleb.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 
 namespace fl = probeless::face_light;
@@ -26,29 +30,10 @@ namespace ft = probeless::face_track;
 
 namespace {
 
-constexpr const char* kUsage =
-    "usage: rtf_train --yaleb DIR|--synthetic DIR [--subjects LIST] [--points N] [--percentile P]\n"
-    "                 [--patch-radius R] [--intensity-exponent G] [--grid-step PX]\n"
-    "                 [--direction-bands B] [--direction-ridge X] [--align none|tracker]\n"
-    "                 --out MODEL\n"
-    "  --yaleb DIR        Extended Yale B cropped folder (yaleBxx/ sub-folders)\n"
-    "  --synthetic DIR    a Yale-B-style folder from `sim --yaleb-style` (same layout; the\n"
-    "                     .pgm images are used, .ppm colour images are ignored)\n"
-    "  --subjects LIST    training subjects, e.g. 1-28 or 1,3,5-7 (default: all in DIR)\n"
-    "  --points N         keep exactly N samples (default: use --percentile)\n"
-    "  --percentile P     keep candidates above the P-th percentile of |RTF coefficient| for\n"
-    "                     at least one coefficient (default 0 = every candidate; the\n"
-    "                     paper's 90 keeps ~300 of 512, Knorr & Kurz sec. 6)\n"
-    "  --patch-radius R   box patch half size in crop pixels (default 2: 5x5)\n"
-    "  --intensity-exponent G  response exponent of the RTF fit (default 0.5; 1 = the paper)\n"
-    "  --grid-step PX     candidate grid step in crop pixels (default 6.42: 512 candidates)\n"
-    "  --direction-bands B  also fit B-band direction RTFs for the directional fit\n"
-    "                     (0 = none, 4 or 5; default 5)\n"
-    "  --direction-ridge X  Tikhonov weight of the direction RTF fit (default 1e-3)\n"
-    "  --align none|tracker  sample each subject on the crop as it is (none, default) or\n"
-    "                     mapped onto the face tracker's landmarks on its frontal-lit image,\n"
-    "                     as the pipeline samples (tracker; docs/face_light.md)\n"
-    "  --out MODEL        model file to write\n";
+constexpr const char* kDescription =
+    "trains the Knorr & Kurz (2014) radiance transfer functions on Extended Yale B crops and\n"
+    "writes a face_light model file (docs/face_light.md); --yaleb (or --synthetic) and --out are\n"
+    "required.";
 
 void Progress(const std::string& label, double fraction) {
   constexpr int kWidth = 40;
@@ -59,13 +44,6 @@ void Progress(const std::string& label, double fraction) {
   std::fflush(stderr);
 }
 
-double ParseNumber(const std::string& flag, const std::string& text) {
-  // parse::'s rules: strtod also took "inf", "nan" and hexadecimal.
-  const auto value = probeless::parse::TryParseDouble(text);
-  if (!value) throw fl::FaceLightError(flag + ": '" + text + "' is not a number");
-  return *value;
-}
-
 int Run(int argc, char** argv) {
   std::string yaleb, out, subjects_text;
   fl::TrainingOptions options;
@@ -74,47 +52,45 @@ int Run(int argc, char** argv) {
   options.direction_bands = 5;  // direction RTFs, bands 0..4 (docs/face_light.md)
   double grid_step = 6.42;
   std::string align = "none";
-  for (int i = 1; i < argc; ++i) {
-    const std::string flag = argv[i];
-    if (flag == "-h" || flag == "--help") {
-      std::cout << kUsage;
-      return 0;
-    }
-    if (i + 1 >= argc) {
-      std::cerr << "rtf_train: " << flag << " needs a value (or is unknown)\n" << kUsage;
-      return 2;
-    }
-    const std::string value = argv[++i];
-    if (flag == "--yaleb" || flag == "--synthetic") {
-      yaleb = value;
-    } else if (flag == "--subjects") {
-      subjects_text = value;
-    } else if (flag == "--points") {
-      options.points = static_cast<int>(ParseNumber(flag, value));
-    } else if (flag == "--percentile") {
-      options.percentile = ParseNumber(flag, value);
-    } else if (flag == "--patch-radius") {
-      options.patch_radius_px = static_cast<int>(ParseNumber(flag, value));
-    } else if (flag == "--intensity-exponent") {
-      options.intensity_exponent = ParseNumber(flag, value);
-    } else if (flag == "--direction-bands") {
-      options.direction_bands = static_cast<int>(ParseNumber(flag, value));
-    } else if (flag == "--direction-ridge") {
-      options.direction_ridge = ParseNumber(flag, value);
-    } else if (flag == "--align") {
-      align = value;
-    } else if (flag == "--grid-step") {
-      grid_step = ParseNumber(flag, value);
-    } else if (flag == "--out") {
-      out = value;
-    } else {
-      std::cerr << "rtf_train: unknown option " << flag << "\n" << kUsage;
-      return 2;
-    }
-  }
+  // An integer option given as any number, truncated (as it always was).
+  auto truncated = [](int* target, const std::string& flag) {
+    return [target, flag](const std::string& text) {
+      *target = static_cast<int>(probeless::parse::ParseDouble(flag, text));
+    };
+  };
+  probeless::node::FlagParser flags("rtf_train", kDescription);
+  flags.Add("--yaleb", &yaleb, "DIR", "Extended Yale B cropped folder (yaleBxx/ sub-folders)");
+  flags.Add("--synthetic", &yaleb, "DIR",
+            "a Yale-B-style folder from `sim --yaleb-style` (same layout; the .pgm images are "
+            "used, .ppm colour images are ignored)");
+  flags.Add("--subjects", &subjects_text, "LIST",
+            "training subjects, e.g. 1-28 or 1,3,5-7 (default: all in DIR)");
+  flags.AddCallback("--points", "N", "keep exactly N samples (0: use --percentile)",
+                    truncated(&options.points, "--points"), std::to_string(options.points));
+  flags.Add("--percentile", &options.percentile, "P",
+            "keep candidates above the P-th percentile of |RTF coefficient| for at least one "
+            "coefficient (0 = every candidate; the paper's 90 keeps ~300 of 512)");
+  flags.AddCallback("--patch-radius", "R", "box patch half size in crop pixels (2: 5x5)",
+                    truncated(&options.patch_radius_px, "--patch-radius"),
+                    std::to_string(options.patch_radius_px));
+  flags.Add("--intensity-exponent", &options.intensity_exponent, "G",
+            "response exponent of the RTF fit (1 = the paper)");
+  flags.Add("--grid-step", &grid_step, "PX",
+            "candidate grid step in crop pixels (6.42: 512 candidates)");
+  flags.AddCallback("--direction-bands", "B",
+                    "also fit B-band direction RTFs for the directional fit (0 = none, 4 or 5)",
+                    truncated(&options.direction_bands, "--direction-bands"),
+                    std::to_string(options.direction_bands));
+  flags.Add("--direction-ridge", &options.direction_ridge, "X",
+            "Tikhonov weight of the direction RTF fit");
+  flags.Add("--align", &align, "none|tracker",
+            "sample each subject on the crop as it is (none) or mapped onto the face tracker's "
+            "landmarks on its frontal-lit image, as the pipeline samples (tracker)");
+  flags.Add("--out", &out, "MODEL", "model file to write");
+  if (!flags.Parse(argc, argv)) return 0;
   if (yaleb.empty() || out.empty()) {
-    std::cerr << "rtf_train: --yaleb (or --synthetic) and --out are required\n" << kUsage;
-    return 2;
+    throw probeless::node::UsageError(
+        "--yaleb (or --synthetic) and --out are required (see --help)");
   }
   const std::vector<int> available = fl::ListYaleBSubjects(yaleb);
   std::vector<int> subjects;
@@ -195,10 +171,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& error) {
-    std::fprintf(stderr, "\nrtf_train: %s\n", error.what());
-    return 1;
-  }
+  return probeless::node::RunMain("rtf_train", [&] { return Run(argc, argv); });
 }
