@@ -4,6 +4,8 @@
 // and frames per second) on stdout, and to --json FILE. Budget: <= 3 ms per frame.
 //
 //   capture_bench [--json OUT] [--iterations N]
+#include "probeless/node/main.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -16,7 +18,7 @@
 
 #include "probeless/capture/convert.h"
 #include "probeless/capture/registration.h"
-#include "probeless/parse/number.h"
+#include "probeless/node/flags.h"
 
 namespace {
 
@@ -44,29 +46,16 @@ Figure Time(const std::string& name, int iterations, const std::function<void()>
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   std::string json_path;
   int iterations = 200;
-  constexpr const char* kUsage = "usage: capture_bench [--json OUT] [--iterations N]\n";
-  try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "-h" || a == "--help") {
-        std::printf("%s", kUsage);
-        return 0;
-      } else if (a == "--json" && i + 1 < argc) {
-        json_path = argv[++i];
-      } else if (a == "--iterations" && i + 1 < argc) {
-        iterations = probeless::parse::ParseInteger<int>(a, argv[++i], 1);
-      } else {
-        std::fprintf(stderr, "%s", kUsage);
-        return 2;
-      }
-    }
-  } catch (const probeless::parse::NumberError& e) {
-    std::fprintf(stderr, "capture_bench: %s\n", e.what());
-    return 2;
-  }
+  probeless::node::FlagParser flags(
+      "capture_bench",
+      "single-core time of the capture conversions on a 640x480 frame into a\n"
+      "bus-slot-sized buffer (YUYV, MJPEG, Kinect 11-bit depth, depth registration); prints JSON");
+  flags.Add("--json", &json_path, "OUT", "also write the JSON to OUT");
+  flags.Add("--iterations", &iterations, "N", "timed frames per conversion", 1);
+  if (!flags.Parse(argc, argv)) return 0;
   const uint32_t w = 640, h = 480;
   // A natural-ish test pattern (gradients plus texture) so JPEG has real work to do.
   cv::Mat bgr(h, w, CV_8UC3);
@@ -123,4 +112,8 @@ int main(int argc, char** argv) {
   std::fputs(json.str().c_str(), stdout);
   if (!json_path.empty()) std::ofstream(json_path) << json.str();
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return probeless::node::RunMain("capture_bench", [&] { return Run(argc, argv); });
 }
