@@ -8,6 +8,8 @@
 // Depth in mm becomes raw disparity with the libfreenect model (capture::KinectDepthModel); depths
 // the Kinect cannot measure (0, < ~0.32 m, > 10 m) become 2047 ("no data"). Frames must be 640x480
 // (the Kinect's medium resolution). Exit: 0 done, 2 bad input (one line on stderr).
+#include "probeless/node/main.h"
+
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -16,7 +18,7 @@
 
 #include "probeless/capture/convert.h"
 #include "probeless/msgs/image.h"
-#include "probeless/parse/number.h"
+#include "probeless/node/flags.h"
 #include "probeless/replay/sources.h"
 
 namespace {
@@ -24,17 +26,7 @@ namespace {
 using namespace probeless;
 namespace fs = std::filesystem;
 
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
-
-constexpr const char* kUsage =
-    "usage: fakenect_dump SOURCE OUT_DIR [--max-frames N] [--fps F]\n"
-    "  SOURCE        a dataset folder (7-Scenes, TUM RGB-D) or an MCAP log with colour and depth\n"
-    "  OUT_DIR       the fakenect dump (INDEX.txt, r-*.ppm, d-*.pgm), created\n"
-    "  --max-frames  at most N colour and N depth frames (default 0: all)\n"
-    "  --fps         frame rate of sources without time stamps (default 30)\n";
+using node::UsageError;
 
 void WriteFile(const fs::path& path, const std::string& header, const void* data, size_t bytes) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
@@ -44,33 +36,25 @@ void WriteFile(const fs::path& path, const std::string& header, const void* data
 }
 
 int Run(int argc, char** argv) {
-  std::vector<std::string> positional;
   uint64_t max_frames = 0;
   dataset::DatasetOptions options;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::printf("%s", kUsage);
-      return 0;
-    } else if (a == "--max-frames") {
-      max_frames = parse::ParseInteger<uint64_t>(a, value());
-    } else if (a == "--fps") {
-      options.fps = parse::ParsePositiveDouble(a, value());
-    } else if (a.starts_with("--")) {
-      throw UsageError("unknown option '" + a + "'");
-    } else {
-      positional.push_back(a);
-    }
-  }
-  if (positional.size() != 2) {
+  std::string source_path, out_path;
+  node::FlagParser flags("fakenect_dump",
+                         "writes a fakenect dump (libfreenect's Kinect v1 simulator) from any "
+                         "probeless source with colour and depth");
+  flags.AddPositional(
+      "SOURCE", &source_path,
+      "a dataset folder (7-Scenes, TUM RGB-D) or an MCAP log with colour and depth (required)");
+  flags.AddPositional("OUT_DIR", &out_path,
+                      "the fakenect dump (INDEX.txt, r-*.ppm, d-*.pgm), created (required)");
+  flags.Add("--max-frames", &max_frames, "N", "at most N colour and N depth frames (0: all)");
+  flags.AddPositive("--fps", &options.fps, "F", "frame rate of sources without time stamps");
+  if (!flags.Parse(argc, argv)) return 0;
+  if (!flags.Given("SOURCE") || !flags.Given("OUT_DIR")) {
     throw UsageError("usage: fakenect_dump SOURCE OUT_DIR [--max-frames N] [--fps F]");
   }
-  std::unique_ptr<dataset::Source> source = replay::OpenSource(positional[0], options);
-  const fs::path out_dir = positional[1];
+  std::unique_ptr<dataset::Source> source = replay::OpenSource(source_path, options);
+  const fs::path out_dir = out_path;
   fs::create_directories(out_dir);
   std::ofstream index(out_dir / "INDEX.txt", std::ios::trunc);
   const capture::KinectDepthModel& model = capture::KinectDepthModel::Default();
@@ -90,7 +74,7 @@ int Run(int argc, char** argv) {
       continue;
     }
     if (im.width != 640 || im.height != 480) {
-      throw UsageError("'" + positional[0] + "' topic " + topic.topic + " has " +
+      throw UsageError("'" + source_path + "' topic " + topic.topic + " has " +
                        std::to_string(im.width) + "x" + std::to_string(im.height) +
                        " images: fakenect needs 640x480");
     }
@@ -117,7 +101,7 @@ int Run(int argc, char** argv) {
           } else if (im.encoding == msgs::Encoding::kMono8) {
             p[0] = p[1] = p[2] = row[x];
           } else {
-            throw UsageError("'" + positional[0] + "' topic " + topic.topic + " has " +
+            throw UsageError("'" + source_path + "' topic " + topic.topic + " has " +
                              std::string(msgs::EncodingName(im.encoding)) +
                              " images: expected rgb8, bgr8, mono8 or depth16");
           }
@@ -131,7 +115,7 @@ int Run(int argc, char** argv) {
   }
   index.close();
   if (colour_frames + depth_frames == 0) {
-    throw UsageError("'" + positional[0] + "' has no images");
+    throw UsageError("'" + source_path + "' has no images");
   }
   std::printf("fakenect_dump: wrote %llu RGB and %llu depth frames to %s\n",
               static_cast<unsigned long long>(colour_frames),
@@ -142,10 +126,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] fakenect_dump: %s\n", e.what());
-    return 2;
-  }
+  return node::RunMain("fakenect_dump", [&] { return Run(argc, argv); });
 }

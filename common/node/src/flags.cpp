@@ -66,6 +66,15 @@ void FlagParser::Add(std::string name, double* value, std::string metavar, std::
            std::move(set));
 }
 
+void FlagParser::AddPositive(std::string name, double* value, std::string metavar,
+                             std::string help) {
+  auto set = [=, flag = name](const std::string& text) {
+    *value = parse::ParsePositiveDouble(flag, text);
+  };
+  AddValue(std::move(name), std::move(metavar), std::move(help), FormatReal(*value),
+           std::move(set));
+}
+
 void FlagParser::Add(std::string name, float* value, std::string metavar, std::string help,
                      float min, float max) {
   auto set = [=, flag = name](const std::string& text) {

@@ -29,6 +29,7 @@ struct Tool {
   int frames = 200;
   uint64_t seed = 7;
   double ridge = 0.5;
+  double fps = 30;
   float scale = 1;
   std::vector<std::string> light_params;
   std::string mode = "gbuffer";
@@ -47,6 +48,7 @@ struct Tool {
     flags.Add("--seed", &seed, "S", "random seed");
     flags.Add("--ridge", &ridge, "X", "regularisation", 0, 1);
     flags.Add("--scale", &scale, "X", "object scale");
+    flags.AddPositive("--fps", &fps, "F", "frame rate");
     flags.Add("--light-param", &light_params, "K:=V", "a scene_light parameter");
     flags.AddChoice("--mode", &mode, {"gbuffer", "depth"}, "scene_light input");
     flags.AddCallback(
@@ -112,8 +114,8 @@ TEST(FlagParser, WithoutArgumentsKeepsTheDefaults) {
 TEST(FlagParser, StoresEveryKindOfFlag) {
   Tool t;
   EXPECT_TRUE(t.Parse({"--scenes", "a/b", "--quiet", "--no-flow", "--frames", "12", "--seed",
-                       "18446744073709551615", "--ridge", "0.25", "--scale", "-2.5", "--mode",
-                       "depth", "--size", "320x240"}));
+                       "18446744073709551615", "--ridge", "0.25", "--scale", "-2.5", "--fps",
+                       "12.5", "--mode", "depth", "--size", "320x240"}));
   EXPECT_EQ(t.scenes, "a/b");
   EXPECT_TRUE(t.quiet);
   EXPECT_FALSE(t.flow);
@@ -121,6 +123,7 @@ TEST(FlagParser, StoresEveryKindOfFlag) {
   EXPECT_EQ(t.seed, UINT64_MAX);
   EXPECT_DOUBLE_EQ(t.ridge, 0.25);
   EXPECT_FLOAT_EQ(t.scale, -2.5f);
+  EXPECT_DOUBLE_EQ(t.fps, 12.5);
   EXPECT_EQ(t.mode, "depth");
   EXPECT_EQ(t.width, 320);
   EXPECT_EQ(t.height, 240);
@@ -168,6 +171,7 @@ TEST(FlagParser, ErrorMessages) {
   EXPECT_EQ(t.Error({"--ridge", "x"}), "--ridge expects a number in [0, 1], got 'x'");
   EXPECT_EQ(t.Error({"--ridge=2"}), "--ridge expects a number in [0, 1], got '2'");
   EXPECT_EQ(t.Error({"--scale", "nan"}), "--scale expects a number, got 'nan'");
+  EXPECT_EQ(t.Error({"--fps", "0"}), "--fps expects a positive number, got '0'");
   EXPECT_EQ(t.Error({"--mode", "rgb"}), "--mode expects one of gbuffer|depth, got 'rgb'");
   EXPECT_EQ(t.Error({"--size", "640"}), "--size expects WxH, got '640'");
   EXPECT_EQ(t.Error({"--size", "0x4"}), "--size expects a positive integer, got '0'");
@@ -245,6 +249,7 @@ TEST(FlagParser, UsageListsFlagsMetavarsHelpAndDefaults) {
   EXPECT_THAT(usage, HasSubstr(Line("--frames N", "frames to time (default: 200)")));
   EXPECT_THAT(usage, HasSubstr(Line("--seed S", "random seed (default: 7)")));
   EXPECT_THAT(usage, HasSubstr(Line("--ridge X", "regularisation (default: 0.5)")));
+  EXPECT_THAT(usage, HasSubstr(Line("--fps F", "frame rate (default: 30)")));
   EXPECT_THAT(usage, HasSubstr(Line("--light-param K:=V", "a scene_light parameter (repeatable)")));
   EXPECT_THAT(usage,
               HasSubstr(Line("--mode gbuffer|depth", "scene_light input (default: gbuffer)")));

@@ -83,6 +83,10 @@ class FlagParser {
            double min = std::numeric_limits<double>::lowest(),
            double max = std::numeric_limits<double>::max());
 
+  // A real flag that must be > 0 (a rate, a scale): parse::ParsePositiveDouble, "--fps expects a
+  // positive number, got '0'", thrown as UsageError.
+  void AddPositive(std::string name, double* value, std::string metavar, std::string help);
+
   // The same for a float target (parse::ParseFloat: values beyond float's range are refused).
   void Add(std::string name, float* value, std::string metavar, std::string help,
            float min = std::numeric_limits<float>::lowest(),
