@@ -31,6 +31,7 @@
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/header.h"
 #include "probeless/msgs/sh_light.h"
+#include "probeless/node/flags.h"
 
 namespace {
 
@@ -113,36 +114,19 @@ int Run(int argc, char** argv) {
   std::string out_dir = ".";
   std::string name = "face";
   std::string stages;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "-h" || a == "--help") {
-      std::printf(
-          "usage: demo_report LOG.mcap [--estimate /face/light] [--truth /groundtruth/light]\n"
-          "                   [--out DIR] [--name face] [--stage ...]\n");
-      return 0;
-    }
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--estimate") {
-      estimate_topic = value();
-    } else if (a == "--truth") {
-      truth_topic = value();
-    } else if (a == "--out") {
-      out_dir = value();
-    } else if (a == "--name") {
-      name = value();
-    } else if (a == "--stage") {
-      stages = value();
-    } else if (a.starts_with("--")) {
-      throw node::UsageError("unknown option '" + a + "'");
-    } else if (log_path.empty()) {
-      log_path = a;
-    } else {
-      throw node::UsageError("more than one log given");
-    }
-  }
+  node::FlagParser flags(
+      "demo_report",
+      "reads an MCAP recording of a light-estimation graph and writes estimated vs true light\n"
+      "direction over time (DIR/<name>_light.png), the angular error per frame and per-node\n"
+      "latency figures (DIR/<name>_report.json), and prints the summary");
+  flags.AddPositional("LOG.mcap", &log_path, "the recording (required)");
+  flags.Add("--estimate", &estimate_topic, "TOPIC", "the estimated msgs::ShLight");
+  flags.Add("--truth", &truth_topic, "TOPIC", "the true msgs::ShLight");
+  flags.Add("--out", &out_dir, "DIR", "where the PNG and the JSON go");
+  flags.Add("--name", &name, "NAME", "prefix of the files written");
+  flags.Add("--stage", &stages, "T1:T2:...",
+            "topics of one frame in pipeline order: the latency of each stage");
+  if (!flags.Parse(argc, argv)) return 0;
   if (log_path.empty()) throw node::UsageError("no log given (demo_report LOG.mcap ...)");
 
   const log::McapReader reader(log_path);
