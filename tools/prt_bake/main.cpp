@@ -13,9 +13,11 @@
 #include <cstdlib>
 #include <ctime>
 #include <exception>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "probeless/prt/demo_objects.h"
 #include "probeless/prt/prt.h"
@@ -35,76 +37,44 @@ struct Options {
   bool benchmark = false;
 };
 
-constexpr const char* kUsage =
-    "usage: prt_bake (MESH | --demo nose|cap|glasses) --out FILE.prt [--occluder "
-    "head|none|SCENE] [--bands B] [--samples N] [--seed S] [--bounce] "
-    "[--no-self-occlusion] [--threads N] [--scale F] [--quiet]\n"
-    "       prt_bake --benchmark [--threads N] [--samples N]\n";
-
-[[noreturn]] void Usage(const std::string& message) {
-  std::fprintf(stderr, "prt_bake: %s\n%s", message.c_str(), kUsage);
-  std::exit(2);
-}
-
-// parse::'s rules; strtol took "3x" as 3 and a 20-digit count as LONG_MAX.
-template <class T>
-T ParseInt(const std::string& option, const std::string& text, T min) {
-  try {
-    return parse::ParseInteger<T>(option, text, min);
-  } catch (const parse::NumberError& e) {
-    Usage(e.what());
-  }
-}
-
-Options Parse(int argc, char** argv) {
+// The options of the command line, nothing after --help (the usage is printed). Throws
+// node::UsageError.
+std::optional<Options> Parse(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) Usage(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--out")
-      o.out = value();
-    else if (a == "--demo")
-      o.demo = value();
-    else if (a == "--occluder")
-      o.occluder = value();
-    else if (a == "--bands")
-      o.bake.bands = ParseInt<int>(a, value(), 1);
-    else if (a == "--samples")
-      o.bake.samples = ParseInt<int>(a, value(), 1);
-    else if (a == "--seed")
-      o.bake.seed = ParseInt<uint64_t>(a, value(), 0);
-    else if (a == "--threads")
-      o.bake.threads = ParseInt<int>(a, value(), 1);
-    else if (a == "--scale") {
-      const std::string text = value();
-      const auto scale = parse::TryParseDouble(text, 0);
-      if (!scale || *scale <= 0) Usage("--scale expects a positive number, got '" + text + "'");
-      o.scale = static_cast<float>(*scale);
-    } else if (a == "--bounce")
-      o.bake.interreflection = true;
-    else if (a == "--no-self-occlusion")
-      o.bake.self_occlusion = false;
-    else if (a == "--quiet")
-      o.quiet = true;
-    else if (a == "--benchmark")
-      o.benchmark = true;
-    else if (a == "-h" || a == "--help") {
-      std::printf("%s", kUsage);
-      std::exit(0);
-    } else if (!a.empty() && a[0] == '-')
-      Usage("unknown option " + a);
-    else if (o.input.empty())
-      o.input = a;
-    else
-      Usage("more than one input mesh");
-  }
+  node::FlagParser flags(
+      "prt_bake",
+      "precomputed radiance transfer for a virtual object (Knorr & Kurz 2014 sec. 4.2, eq. 20):\n"
+      "  prt_bake (MESH | --demo nose|cap|glasses) --out FILE.prt [options]\n"
+      "  prt_bake --benchmark [--threads N] [--samples N]   (last line: \"X.X M rays/s\")");
+  flags.AddPositional("MESH", &o.input, "MESH.obj or MESH.ply, in the bake frame");
+  flags.Add("--demo", &o.demo, "nose|cap|glasses", "a built-in demo object instead of MESH");
+  flags.Add("--out", &o.out, "FILE.prt", "the transfer file to write (required)");
+  flags.Add("--occluder", &o.occluder, "head|none|SCENE",
+            "the proxy head, nothing, or a scene mesh (.obj, .ply)");
+  flags.Add("--bands", &o.bake.bands, "B", "SH bands (3 or 4)", 1);
+  flags.Add("--samples", &o.bake.samples, "N", "rays per vertex (rounded down to a square)", 1);
+  flags.Add("--seed", &o.bake.seed, "S", "sampling seed", 0);
+  flags.Add("--bounce", &o.bake.interreflection, "one interreflection bounce");
+  flags.AddSwitch(
+      "--no-self-occlusion", [&] { o.bake.self_occlusion = false; },
+      "the object does not shadow itself");
+  flags.Add("--threads", &o.bake.threads, "N", "bake threads", 1);
+  flags.AddCallback(
+      "--scale", "F", "scale the mesh by F (> 0)",
+      [&](const std::string& text) {
+        o.scale = static_cast<float>(parse::ParsePositiveDouble("--scale", text));
+      },
+      "1");
+  flags.Add("--quiet", &o.quiet, "no progress bar");
+  flags.Add("--benchmark", &o.benchmark,
+            "bake the built-in 50k-vertex scene with the proxy head and print the speed");
+  if (!flags.Parse(argc, argv)) return std::nullopt;
   if (o.benchmark) return o;
-  if (o.input.empty() == o.demo.empty()) Usage("give exactly one of MESH or --demo NAME");
-  if (o.out.empty()) Usage("--out FILE.prt is required");
-  if (!(o.scale > 0)) Usage("--scale must be > 0");
+  if (o.input.empty() == o.demo.empty()) {
+    throw node::UsageError("give exactly one of MESH or --demo NAME");
+  }
+  if (o.out.empty()) throw node::UsageError("--out FILE.prt is required");
+  if (!(o.scale > 0)) throw node::UsageError("--scale must be > 0");
   return o;
 }
 
@@ -122,9 +92,12 @@ void Progress(size_t done, size_t total) {
 
 }  // namespace
 
+// Not node::RunMain: every error is "prt_bake: <message>" and exit code 2 (docs/render.md).
 int main(int argc, char** argv) {
-  Options o = Parse(argc, argv);
   try {
+    const std::optional<Options> parsed = Parse(argc, argv);
+    if (!parsed) return 0;
+    Options o = *parsed;
     if (!o.quiet) o.bake.progress = Progress;
     std::vector<prt::Occluder> occluders;
     raytrace::Mesh mesh;
