@@ -22,6 +22,7 @@
 
 #include "probeless/calib/calibration.h"
 #include "probeless/msgs/image.h"
+#include "probeless/node/flags.h"
 #include "probeless/node/node.h"
 #include "probeless/parse/number.h"
 
@@ -29,44 +30,33 @@ namespace {
 
 using namespace probeless;
 
-constexpr const char* kUsage =
-    "usage: calibrate --size 9x6 --square 0.025 [--topic /camera/image] [--frames 20]\n"
-    "                 [--out camera.yaml] [--name webcam] [--min-interval 0.5]\n"
-    "  --size: INNER corners (columns x rows); --square: square side in metres\n";
-
 int Run(int argc, char** argv) {
-  node::Node node(argc, argv, "calibrate", kUsage);
-  std::string topic = node.Param("topic", "/camera/image");
-  std::string out = node.Param("out", "camera.yaml");
-  std::string name = node.Param("name", "camera");
-  std::string size_text = node.Param("size", "9x6");
-  double square = node.Param("square", 0.025);
-  int frames = node.Param("frames", 20);
-  double min_interval = node.Param("min_interval", 0.5);
-  const auto& args = node.args();
-  for (size_t i = 0; i < args.size(); ++i) {
-    auto value = [&]() -> std::string {
-      if (i + 1 >= args.size()) throw node::UsageError(args[i] + " needs a value");
-      return args[++i];
-    };
-    const std::string a = args[i];
-    if (a == "--topic")
-      topic = value();
-    else if (a == "--out")
-      out = value();
-    else if (a == "--name")
-      name = value();
-    else if (a == "--size")
-      size_text = value();
-    else if (a == "--square")
-      square = node::ParseNumberOption(a, value());
-    else if (a == "--frames")
-      frames = parse::ParseInteger<int>(a, value(), 3);
-    else if (a == "--min-interval")
-      min_interval = node::ParseNumberOption(a, value());
-    else
-      throw node::UsageError("unknown option '" + a + "'");
-  }
+  // Defaults, then the node's params (-p name:=value), then these flags.
+  std::string topic = "/camera/image", out = "camera.yaml", name = "camera", size_text = "9x6";
+  double square = 0.025;
+  int frames = 20;
+  double min_interval = 0.5;
+  node::FlagParser flags("calibrate",
+                         "checkerboard calibration of a camera from its image topic; writes a ROS "
+                         "camera_info YAML file");
+  flags.Add("--size", &size_text, "COLSxROWS", "INNER corners of the board");
+  flags.Add("--square", &square, "M", "square side in metres");
+  flags.Add("--topic", &topic, "TOPIC", "the camera's image topic");
+  flags.Add("--frames", &frames, "N", "views with the whole board found", 3);
+  flags.Add("--out", &out, "FILE.yaml", "the camera_info file to write");
+  flags.Add("--name", &name, "NAME", "camera_name in the file");
+  flags.Add("--min-interval", &min_interval, "S", "seconds between two views at least");
+  node::Node node(argc, argv, "calibrate", flags.Usage());  // answers --help
+  topic = node.Param("topic", topic);
+  out = node.Param("out", out);
+  name = node.Param("name", name);
+  size_text = node.Param("size", size_text);
+  square = node.Param("square", square);
+  frames = node.Param("frames", frames);
+  min_interval = node.Param("min_interval", min_interval);
+  std::vector<const char*> args = {argv[0]};
+  for (const std::string& arg : node.args()) args.push_back(arg.c_str());
+  flags.Parse(static_cast<int>(args.size()), args.data());
   // Whole-text parse: sscanf took "9x6abc" and "9x6x2" as 9x6.
   const size_t x = size_text.find('x');
   const std::string_view size_view(size_text);
