@@ -1,12 +1,15 @@
 // dds_bench: 1.5 MB frames (1000x500 rgb8, 1'500'000 bytes of pixels) from one probeless graph to
 // another across two dds_bridge processes over Cyclone DDS on loopback (two PROBELESS_DOMAIN
 // values, one DDS domain). Phases:
-//   latency   reliable, 30 Hz paced: bus publish -> bus receive on the other graph (p50/p90/p99/max)
-//   throughput reliable, unpaced for --seconds: frames/s and MB/s delivered, drops
-//   best_effort 30 Hz paced with the default image QoS (best effort, depth 2): delivered fraction
-//   rgbd_30hz  640x480 rgb8 + depth16 on two topics (regex routes) at 30 Hz, default image QoS:
+//   latency   reliable, 30 Hz paced: bus publish -> bus receive on the other graph
+//   (p50/p90/p99/max) throughput reliable, unpaced for --seconds: frames/s and MB/s delivered,
+//   drops best_effort 30 Hz paced with the default image QoS (best effort, depth 2): delivered
+//   fraction rgbd_30hz  640x480 rgb8 + depth16 on two topics (regex routes) at 30 Hz, default image
+//   QoS:
 //              frames delivered per topic and the drops the two bridges reported at exit
 // usage: dds_bench [--json OUT] [--frames N] [--seconds S] [--domain-id D]
+#include "probeless/node/main.h"
+
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -29,7 +32,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/image.h"
 #include "probeless/msgs/layout.h"
-#include "probeless/node/main.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 
 extern char** environ;
@@ -78,8 +81,8 @@ struct Run {
   double seconds = 0;
 };
 
-void Publish(bus::Publisher& pub, uint32_t index, uint32_t width = kWidth, uint32_t height = kHeight,
-             msgs::Encoding encoding = msgs::Encoding::kRgb8) {
+void Publish(bus::Publisher& pub, uint32_t index, uint32_t width = kWidth,
+             uint32_t height = kHeight, msgs::Encoding encoding = msgs::Encoding::kRgb8) {
   bus::Loan loan = pub.Borrow(msgs::Image::MessageBytesFor(width, height, encoding));
   auto* image = new (loan.data().data()) msgs::Image();
   image->header.stamp_ns = kBaseStamp + int64_t{index} * 1'000'000;
@@ -101,13 +104,15 @@ Run Measure(bus::Publisher& pub, bus::Subscriber& sub, uint32_t first, uint32_t 
     while (auto s = sub.Take(wait)) {
       wait = 0ns;
       const auto now = Clock::now();
-      const auto index = static_cast<uint32_t>((s->As<msgs::Image>()->header.stamp_ns - kBaseStamp) / 1'000'000);
+      const auto index =
+          static_cast<uint32_t>((s->As<msgs::Image>()->header.stamp_ns - kBaseStamp) / 1'000'000);
       if (index < first) continue;
       if (static_cast<int64_t>(index) <= last) ++run.out_of_order;
       last = index;
       ++run.received;
       if (auto it = sent.find(index); it != sent.end()) {
-        run.latency_ms.push_back(std::chrono::duration<double, std::milli>(now - it->second).count());
+        run.latency_ms.push_back(
+            std::chrono::duration<double, std::milli>(now - it->second).count());
       }
     }
   };
@@ -159,23 +164,23 @@ int Main(int argc, char** argv) {
   uint32_t frames = 300;
   double seconds = 10;
   int domain_id = 40 + getpid() % 100;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError("option " + arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "--json") json = value();
-    else if (arg == "--frames") frames = static_cast<uint32_t>(node::ParseNumberOption(arg, value()));
-    else if (arg == "--seconds") seconds = node::ParseNumberOption(arg, value());
-    else if (arg == "--domain-id") domain_id = parse::ParseInteger<int>(arg, value());
-    else if (arg == "-h" || arg == "--help") {
-      std::puts("usage: dds_bench [--json OUT] [--frames N] [--seconds S] [--domain-id D]");
-      return 0;
-    } else {
-      throw node::UsageError("unknown option '" + arg + "'");
-    }
-  }
+  node::FlagParser flags("dds_bench",
+                         "1.5 MB frames from one probeless graph to another across two dds_bridge "
+                         "processes over\nCyclone DDS on loopback: latency, throughput, best "
+                         "effort, RGB-D at 30 Hz");
+  flags.Add("--json", &json, "OUT", "write the figures as JSON");
+  flags.AddCallback(
+      "--frames", "N", "frames of the paced phases",
+      [&](const std::string& text) {
+        frames = static_cast<uint32_t>(node::ParseNumberOption("--frames", text));
+      },
+      std::to_string(frames));
+  flags.Add("--seconds", &seconds, "S", "length of the throughput phase");
+  flags.AddCallback(
+      "--domain-id", "D", "the DDS domain",
+      [&](const std::string& text) { domain_id = parse::ParseInteger<int>("--domain-id", text); },
+      "40 + pid % 100");
+  if (!flags.Parse(argc, argv)) return 0;
   const std::string exe =
       (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "dds_bridge").string();
   const std::string a = "ddsbench" + std::to_string(getpid()) + "a";
@@ -218,7 +223,9 @@ int Main(int argc, char** argv) {
   const Run thr = phase("/camera/.*=reliable,4,", 1'000'000, 0, seconds);
   std::fprintf(stderr, "best-effort phase (default image QoS, 30 Hz, %u frames)...\n", frames);
   const Run be = phase("", frames, 30, 1e9);
-  std::fprintf(stderr, "RGB-D phase (640x480 rgb8 + depth16, 30 Hz, default image QoS, %u frames)...\n", frames);
+  std::fprintf(stderr,
+               "RGB-D phase (640x480 rgb8 + depth16, 30 Hz, default image QoS, %u frames)...\n",
+               frames);
   // Two topics at once, regex routes, the default image QoS (best effort, depth 2).
   uint64_t rgbd_received[2] = {0, 0}, rgbd_published = 0, rgbd_dropped = 0;
   std::vector<double> rgbd_latency;
@@ -230,11 +237,14 @@ int Main(int argc, char** argv) {
     bus::SubscriberOptions so;
     so.queue_depth = 64;
     so.node_name = "/dds_bench";
-    bus::Subscriber subs[2] = {bus::Subscriber("/camera/image", msgs::TopicTypeOf<msgs::Image>(), so),
-                               bus::Subscriber("/camera/depth", msgs::TopicTypeOf<msgs::Image>(), so)};
+    bus::Subscriber subs[2] = {
+        bus::Subscriber("/camera/image", msgs::TopicTypeOf<msgs::Image>(), so),
+        bus::Subscriber("/camera/depth", msgs::TopicTypeOf<msgs::Image>(), so)};
     auto bridge_b = std::make_unique<Child>(
-        exe, std::vector<std::string>{"--ros-args", "-r", "__node:=bridge_b", "-p", "from_dds_regex:=" + regex,
-                                      "-p", "domain_id:=" + std::to_string(domain_id), "-p", "stats_period_s:=0"},
+        exe,
+        std::vector<std::string>{
+            "--ros-args", "-r", "__node:=bridge_b", "-p", "from_dds_regex:=" + regex, "-p",
+            "domain_id:=" + std::to_string(domain_id), "-p", "stats_period_s:=0"},
         b, out_b);
     setenv("PROBELESS_DOMAIN", a.c_str(), 1);
     bus::PublisherOptions po;
@@ -245,8 +255,10 @@ int Main(int argc, char** argv) {
     po.max_message_bytes = msgs::Image::MessageBytesFor(640, 480, msgs::Encoding::kDepth16);
     bus::Publisher depth("/camera/depth", msgs::TopicTypeOf<msgs::Image>(), po);
     auto bridge_a = std::make_unique<Child>(
-        exe, std::vector<std::string>{"--ros-args", "-r", "__node:=bridge_a", "-p", "to_dds_regex:=" + regex,
-                                      "-p", "domain_id:=" + std::to_string(domain_id), "-p", "stats_period_s:=0"},
+        exe,
+        std::vector<std::string>{
+            "--ros-args", "-r", "__node:=bridge_a", "-p", "to_dds_regex:=" + regex, "-p",
+            "domain_id:=" + std::to_string(domain_id), "-p", "stats_period_s:=0"},
         a, out_a);
     uint32_t next = 0;
     const auto deadline = Clock::now() + 20s;
@@ -256,21 +268,26 @@ int Main(int argc, char** argv) {
       Publish(depth, next, 640, 480, msgs::Encoding::kDepth16);
       ++next;
       std::this_thread::sleep_for(33ms);
-      for (int k = 0; k < 2; ++k) while (subs[k].TryTake()) seen[k] = true;
+      for (int k = 0; k < 2; ++k)
+        while (subs[k].TryTake()) seen[k] = true;
     }
     if (!(seen[0] && seen[1])) throw std::runtime_error("RGB-D: no frames crossed within 20 s");
     std::this_thread::sleep_for(300ms);
-    for (auto& sub : subs) while (sub.TryTake()) {}
+    for (auto& sub : subs)
+      while (sub.TryTake()) {
+      }
     const uint32_t first = next;
     std::map<uint32_t, Clock::time_point> sent;
     auto drain = [&] {
       for (int k = 0; k < 2; ++k) {
         while (auto sm = subs[k].TryTake()) {
-          const auto index = static_cast<uint32_t>((sm->As<msgs::Image>()->header.stamp_ns - kBaseStamp) / 1'000'000);
+          const auto index = static_cast<uint32_t>(
+              (sm->As<msgs::Image>()->header.stamp_ns - kBaseStamp) / 1'000'000);
           if (index < first) continue;
           ++rgbd_received[k];
           if (k == 0 && sent.count(index)) {
-            rgbd_latency.push_back(std::chrono::duration<double, std::milli>(Clock::now() - sent[index]).count());
+            rgbd_latency.push_back(
+                std::chrono::duration<double, std::milli>(Clock::now() - sent[index]).count());
           }
         }
       }
@@ -312,27 +329,35 @@ int Main(int argc, char** argv) {
   char out[4096];
   std::snprintf(
       out, sizeof(out),
-      "{\n  \"frame_bytes\": %zu,\n  \"frame\": \"%ux%u rgb8\",\n  \"transport\": \"Cyclone DDS 0.10 loopback (127.0.0.1, unicast)\",\n"
-      "  \"latency\": {\"qos\": \"reliable depth 4\", \"rate_hz\": 30, \"published\": %llu, \"received\": %llu,"
-      " \"out_of_order\": %llu, \"p50_ms\": %.3f, \"p90_ms\": %.3f, \"p99_ms\": %.3f, \"max_ms\": %.3f},\n"
-      "  \"throughput\": {\"qos\": \"reliable depth 4\", \"seconds\": %.2f, \"published\": %llu, \"received\": %llu,"
+      "{\n  \"frame_bytes\": %zu,\n  \"frame\": \"%ux%u rgb8\",\n  \"transport\": \"Cyclone DDS "
+      "0.10 loopback (127.0.0.1, unicast)\",\n"
+      "  \"latency\": {\"qos\": \"reliable depth 4\", \"rate_hz\": 30, \"published\": %llu, "
+      "\"received\": %llu,"
+      " \"out_of_order\": %llu, \"p50_ms\": %.3f, \"p90_ms\": %.3f, \"p99_ms\": %.3f, \"max_ms\": "
+      "%.3f},\n"
+      "  \"throughput\": {\"qos\": \"reliable depth 4\", \"seconds\": %.2f, \"published\": %llu, "
+      "\"received\": %llu,"
       " \"frames_per_s\": %.1f, \"mb_per_s\": %.1f, \"p50_ms\": %.3f},\n"
-      "  \"best_effort\": {\"qos\": \"best_effort depth 2 (image default)\", \"rate_hz\": 30, \"published\": %llu,"
+      "  \"best_effort\": {\"qos\": \"best_effort depth 2 (image default)\", \"rate_hz\": 30, "
+      "\"published\": %llu,"
       " \"received\": %llu, \"delivered_fraction\": %.4f, \"p50_ms\": %.3f},\n"
-      "  \"rgbd_30hz\": {\"topics\": [\"/camera/image 640x480 rgb8\", \"/camera/depth 640x480 depth16\"],"
+      "  \"rgbd_30hz\": {\"topics\": [\"/camera/image 640x480 rgb8\", \"/camera/depth 640x480 "
+      "depth16\"],"
       " \"qos\": \"best_effort depth 2 (image default)\", \"published_per_topic\": %llu,"
       " \"received_image\": %llu, \"received_depth\": %llu, \"bridge_drops\": %llu,"
       " \"image_p50_ms\": %.3f, \"image_p99_ms\": %.3f}\n}\n",
       bytes, kWidth, kHeight, static_cast<unsigned long long>(lat.published),
-      static_cast<unsigned long long>(lat.received), static_cast<unsigned long long>(lat.out_of_order),
-      Percentile(lat.latency_ms, 0.5), Percentile(lat.latency_ms, 0.9), Percentile(lat.latency_ms, 0.99),
+      static_cast<unsigned long long>(lat.received),
+      static_cast<unsigned long long>(lat.out_of_order), Percentile(lat.latency_ms, 0.5),
+      Percentile(lat.latency_ms, 0.9), Percentile(lat.latency_ms, 0.99),
       Percentile(lat.latency_ms, 1.0), thr.seconds, static_cast<unsigned long long>(thr.published),
       static_cast<unsigned long long>(thr.received), thr.received / thr.seconds,
       thr.received * mb / thr.seconds, Percentile(thr.latency_ms, 0.5),
       static_cast<unsigned long long>(be.published), static_cast<unsigned long long>(be.received),
       be.published ? static_cast<double>(be.received) / be.published : 0.0,
       Percentile(be.latency_ms, 0.5), static_cast<unsigned long long>(rgbd_published),
-      static_cast<unsigned long long>(rgbd_received[0]), static_cast<unsigned long long>(rgbd_received[1]),
+      static_cast<unsigned long long>(rgbd_received[0]),
+      static_cast<unsigned long long>(rgbd_received[1]),
       static_cast<unsigned long long>(rgbd_dropped), Percentile(rgbd_latency, 0.5),
       Percentile(rgbd_latency, 0.99));
   std::fputs(out, stdout);
