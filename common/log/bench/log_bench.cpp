@@ -23,7 +23,8 @@
 #include "probeless/log/mcap_writer.h"
 #include "probeless/log/ros2.h"
 #include "probeless/msgs/image.h"
-#include "probeless/parse/number.h"
+#include "probeless/node/flags.h"
+#include "probeless/node/main.h"
 
 namespace {
 
@@ -86,45 +87,22 @@ struct Result {
   double ratio = 0;
 };
 
-[[noreturn]] void Usage(const char* problem) {
-  std::fprintf(stderr,
-               "log_bench: %s\nusage: log_bench [--frames N] [--chunk-size BYTES] [--dir DIR] "
-               "[--json FILE]\n",
-               problem);
-  std::exit(2);
-}
-
 }  // namespace
 
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   int frames = 300;
   uint64_t chunk_size = 4 * 1024 * 1024;
   std::string dir = std::getenv("TMPDIR") != nullptr ? std::getenv("TMPDIR") : "/tmp";
   std::string json_path;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    if (arg == "-h" || arg == "--help") {
-      std::printf("usage: log_bench [--frames N] [--chunk-size BYTES] [--dir DIR] [--json FILE]\n");
-      return 0;
-    }
-    if (i + 1 >= argc) Usage(("missing value after " + arg).c_str());
-    const std::string value = argv[++i];
-    if (arg == "--frames") {
-      const auto n = probeless::parse::TryParseInteger<int>(value, 1);
-      if (!n) Usage(("--frames expects a positive integer, got '" + value + "'").c_str());
-      frames = *n;
-    } else if (arg == "--chunk-size") {
-      const auto n = probeless::parse::TryParseInteger<uint64_t>(value, 1);
-      if (!n) Usage(("--chunk-size expects a positive integer, got '" + value + "'").c_str());
-      chunk_size = *n;
-    } else if (arg == "--dir") {
-      dir = value;
-    } else if (arg == "--json") {
-      json_path = value;
-    } else {
-      Usage(("unknown option " + arg).c_str());
-    }
-  }
+  probeless::node::FlagParser flags(
+      "log_bench",
+      "McapWriter throughput for 640x480 RGB-D frames (rgb8 + 16UC1, CDR sensor_msgs/msg/Image)\n"
+      "per chunk compression, on one core");
+  flags.Add("--frames", &frames, "N", "frames written per compression", 1);
+  flags.Add("--chunk-size", &chunk_size, "BYTES", "MCAP chunk size", 1);
+  flags.Add("--dir", &dir, "DIR", "where the logs are written ($TMPDIR or /tmp)");
+  flags.Add("--json", &json_path, "FILE", "also write the figures as JSON");
+  if (!flags.Parse(argc, argv)) return 0;
 
   uint64_t noise = 0x9E3779B97F4A7C15ull;
   std::vector<std::vector<std::byte>> rgb;
@@ -206,4 +184,8 @@ int main(int argc, char** argv) {
     }
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return probeless::node::RunMain("log_bench", [&] { return Run(argc, argv); });
 }

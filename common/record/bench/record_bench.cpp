@@ -32,6 +32,8 @@
 #include "probeless/bus/bus.h"
 #include "probeless/log/mcap_reader.h"
 #include "probeless/msgs/image.h"
+#include "probeless/node/flags.h"
+#include "probeless/node/main.h"
 #include "probeless/parse/number.h"
 #include "probeless/record/recorder.h"
 
@@ -41,6 +43,7 @@ namespace bus = probeless::bus;
 namespace log = probeless::log;
 namespace parse = probeless::parse;
 namespace msgs = probeless::msgs;
+namespace node = probeless::node;
 namespace record = probeless::record;
 using Clock = std::chrono::steady_clock;
 
@@ -258,39 +261,28 @@ std::vector<std::string> SplitList(const std::string& text) {
 
 int Run(int argc, char** argv) {
   Config config;
-  for (int i = 1; i < argc; ++i) {
-    const std::string arg = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw std::runtime_error("option " + arg + " needs a value");
-      return argv[++i];
-    };
-    if (arg == "-h" || arg == "--help") {
-      std::printf(
-          "usage: record_bench [--seconds S] [--streams N] [--fps F] [--max-fps F] [--dir DIR]\n"
-          "                    [--compressions none,zstd,lz4] [--json OUT] [--keep]\n");
-      return 0;
-    } else if (arg == "--seconds") {
-      config.seconds = parse::ParsePositiveDouble(arg, value());
-    } else if (arg == "--streams") {
-      config.streams = parse::ParseInteger<int>(arg, value(), 1);
-    } else if (arg == "--fps") {
-      config.fps = parse::ParsePositiveDouble(arg, value());
-    } else if (arg == "--max-fps") {
-      config.max_fps = parse::ParseDouble(arg, value(), 0);
-    } else if (arg == "--dir") {
-      config.dir = value();
-    } else if (arg == "--compressions") {
-      config.compressions = SplitList(value());
-    } else if (arg == "--json") {
-      config.json = value();
-    } else if (arg == "--keep") {
-      config.keep = true;
-    } else {
-      throw std::runtime_error("unknown option '" + arg + "'");
-    }
+  node::FlagParser flags(
+      "record_bench",
+      "sustained recording throughput of record::Recorder: N paced RGB-D streams published from\n"
+      "this process and recorded into --dir; per compression and frame rate the recorded MB/s,\n"
+      "messages published/received/dropped, file bytes and CPU");
+  flags.AddPositive("--seconds", &config.seconds, "S", "recording time per row");
+  flags.Add("--streams", &config.streams, "N", "RGB-D streams", 1);
+  flags.AddPositive("--fps", &config.fps, "F", "frame rate of the first rows");
+  flags.Add("--max-fps", &config.max_fps, "F", "frame rate of the headroom rows (0 skips)", 0);
+  flags.Add("--dir", &config.dir, "DIR", "where the recordings go");
+  std::string compressions;
+  for (const std::string& c : config.compressions) {
+    compressions += (compressions.empty() ? "" : ",") + c;
   }
+  flags.AddCallback(
+      "--compressions", "LIST", "comma-separated: none, lz4, zstd",
+      [&](const std::string& text) { config.compressions = SplitList(text); }, compressions);
+  flags.Add("--json", &config.json, "OUT", "also write the rows as JSON");
+  flags.Add("--keep", &config.keep, "keep the recordings");
+  if (!flags.Parse(argc, argv)) return 0;
   if (!(config.seconds > 0) || config.streams < 1 || !(config.fps > 0) || config.max_fps < 0) {
-    throw std::runtime_error("--seconds, --streams and --fps must be > 0, --max-fps >= 0");
+    throw node::UsageError("--seconds, --streams and --fps must be > 0, --max-fps >= 0");
   }
   for (const std::string& c : config.compressions) log::ParseCompressionOption(c);
   if (getenv("PROBELESS_DOMAIN") == nullptr) {
@@ -350,10 +342,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "record_bench: %s\n", e.what());
-    return 2;
-  }
+  return probeless::node::RunMain("record_bench", [&] { return Run(argc, argv); });
 }
