@@ -20,6 +20,8 @@
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/image.h"
+#include "probeless/node/flags.h"
+#include "probeless/node/main.h"
 
 namespace {
 
@@ -86,18 +88,18 @@ int Run(const std::string& topic, const std::string& out_path) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc == 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
-    std::printf("usage: python_bench_sub TOPIC OUT.json\n");
-    return 0;
-  }
-  if (argc != 3) {
-    std::fprintf(stderr, "usage: python_bench_sub TOPIC OUT.json\n");
-    return 2;
-  }
-  try {
-    return Run(argv[1], argv[2]);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] [python_bench_sub] %s\n", e.what());
-    return 2;
-  }
+  return probeless::node::RunMain("python_bench_sub", [&] {
+    std::string topic, out;
+    probeless::node::FlagParser flags(
+        "python_bench_sub",
+        "the C++ subscriber of python_bench.py: per phase one-way latency, samples received and\n"
+        "dropped, wall and CPU time (docs/benchmarks/python.md)");
+    flags.AddPositional("TOPIC", &topic, "the probeless_msgs/Image topic (required)");
+    flags.AddPositional("OUT.json", &out, "the figures (required)");
+    if (!flags.Parse(argc, argv)) return 0;
+    if (!flags.Given("TOPIC") || !flags.Given("OUT.json")) {
+      throw probeless::node::UsageError("usage: python_bench_sub TOPIC OUT.json");
+    }
+    return Run(topic, out);
+  });
 }
