@@ -40,6 +40,8 @@
 // over the pixels where raw is valid (the same set for every source), and the error by
 // chessboard distance to the object's silhouette (inside in1, in2, in3, in4_6, in7up; outside
 // out1..out3; printed as a table). Exit 0, 2 on bad options or input, 1 otherwise.
+#include "probeless/node/main.h"
+
 #include <time.h>
 
 #include <algorithm>
@@ -62,6 +64,7 @@
 
 #include "probeless/dataset/datasets.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
@@ -72,29 +75,18 @@ namespace {
 
 using namespace probeless;
 
-class UsageError : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
+using node::UsageError;
 
-constexpr const char* kUsage =
-    "usage: fusion_eval --sevenscenes DIR | --tum DIR | --sim SCENARIO --json OUT [options]\n"
-    "  --frames A-B            frame range (0-based, inclusive)\n"
-    "  --peer opencv           also run OpenCV kinfu + ICPOdometry on --peer-frames N (100)\n"
-    "  --mesh OUT.ply          write the volume's mesh\n"
-    "  --poses OUT.txt         write estimated and true poses per frame\n"
-    "  --threads N             worker threads\n"
-    "  --no-merge              skip the depth merge\n"
-    "  --verbose               per-frame lines\n"
-    "  --volume-size M --volume-origin X,Y,Z [--volume-resolution N]\n"
-    "  --min-inliers F         tracking-quality inlier fraction threshold\n"
+constexpr const char* kDescription =
+    "measures the reconstruction pipeline: --sevenscenes DIR | --tum DIR | --sim SCENARIO, and\n"
+    "--json OUT, are required.\n"
     "environment knobs (experiments): FUSION_EVAL_ICP=a,b,c, FUSION_EVAL_TRACK_LEVEL,\n"
     "  FUSION_EVAL_MAXDIST, FUSION_EVAL_MAXW, FUSION_EVAL_TRUNC, FUSION_EVAL_BILATERAL,\n"
     "  FUSION_EVAL_ANGLE, FUSION_EVAL_MERGE_GATE, FUSION_EVAL_MERGE_MAJORITY (0|1),\n"
     "  FUSION_EVAL_MERGE_SIGMAS, FUSION_EVAL_MERGE_QUANT, FUSION_EVAL_DEPTH_SCALE,\n"
     "  FUSION_EVAL_DEPTH_MAX, FUSION_EVAL_FOCAL, FUSION_EVAL_K1=k1[,k2], FUSION_EVAL_NORMALS,\n"
     "  FUSION_EVAL_OBSERVABILITY=good,soft,hard, FUSION_EVAL_NORMAL_BLOCK\n"
-    "exit code: 0 done, 2 bad options or input, 1 otherwise\n";
+    "exit code: 0 done, 2 bad options or input, 1 otherwise";
 
 // An environment knob as a number (parse::ParseDouble / ParseInteger; a malformed value is an
 // error naming the variable, never a silent 0).
@@ -823,52 +815,47 @@ int Run(int argc, char** argv) {
   float volume_size = 5.0f;
   int volume_resolution = 256;
   recon::Vec3f origin{-2.5f, -0.05f, -2.5f};
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      std::printf("%s", kUsage);
-      return 0;
-    } else if (a == "--sevenscenes")
-      sevenscenes = value();
-    else if (a == "--tum")
-      sevenscenes = "tum:" + value();
-    else if (a == "--sim")
-      sim_path = value();
-    else if (a == "--frames")
-      range = ParseRange(value());
-    else if (a == "--peer")
-      peer = value();
-    else if (a == "--peer-frames")
-      peer_frames = parse::ParseInteger<int>(a, value(), 1);
-    else if (a == "--json")
-      json = value();
-    else if (a == "--mesh")
-      mesh = value();
-    else if (a == "--poses")
-      poses_out = value();
-    else if (a == "--threads")
-      threads = parse::ParseInteger<int>(a, value(), 0);
-    else if (a == "--no-merge")
-      merge = false;
-    else if (a == "--verbose")
-      verbose = true;
-    else if (a == "--volume-size")
-      volume_size = static_cast<float>(parse::ParsePositiveDouble(a, value())), volume_given = true;
-    else if (a == "--volume-resolution")
-      volume_resolution = parse::ParseInteger<int>(a, value(), 1), volume_given = true;
-    else if (a == "--min-inliers")
-      min_inliers = parse::ParseFloat(a, value(), 0, 1);
-    else if (a == "--volume-origin") {
-      const std::vector<double> v = parse::ParseDoubleList(a, value(), 3, 3);
-      origin = {static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2])};
-      volume_given = true;
-    } else
-      throw UsageError("unknown option '" + a + "'");
-  }
+  node::FlagParser flags("fusion_eval", kDescription);
+  flags.Add("--sevenscenes", &sevenscenes, "DIR", "a 7-Scenes sequence folder");
+  flags.AddCallback("--tum", "DIR", "a TUM RGB-D folder instead (e.g. a generated scene)",
+                    [&](const std::string& dir) { sevenscenes = "tum:" + dir; });
+  flags.Add("--sim", &sim_path, "SCENARIO", "a simulator scenario: the merge against ground truth");
+  flags.AddCallback("--frames", "A-B", "frame range (0-based, inclusive; default: all)",
+                    [&](const std::string& text) { range = ParseRange(text); });
+  flags.Add("--peer", &peer, "opencv", "also run OpenCV kinfu + ICPOdometry");
+  flags.Add("--peer-frames", &peer_frames, "N", "frames of the peer run", 1);
+  flags.Add("--json", &json, "OUT", "the figures (required)");
+  flags.Add("--mesh", &mesh, "OUT.ply", "write the volume's mesh");
+  flags.Add("--poses", &poses_out, "OUT.txt", "write estimated and true poses per frame");
+  flags.Add("--threads", &threads, "N", "worker threads", 0);
+  flags.AddSwitch(
+      "--no-merge", [&] { merge = false; }, "skip the depth merge");
+  flags.Add("--verbose", &verbose, "per-frame lines");
+  flags.AddCallback(
+      "--volume-size", "M", "volume side in metres",
+      [&](const std::string& text) {
+        volume_size = static_cast<float>(parse::ParsePositiveDouble("--volume-size", text));
+        volume_given = true;
+      },
+      "5 (7-Scenes: the library's 2)");
+  flags.AddCallback(
+      "--volume-origin", "X,Y,Z", "volume corner in metres",
+      [&](const std::string& text) {
+        const std::vector<double> v = parse::ParseDoubleList("--volume-origin", text, 3, 3);
+        origin = {static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2])};
+        volume_given = true;
+      },
+      "-2.5,-0.05,-2.5");
+  flags.AddCallback(
+      "--volume-resolution", "N", "voxels per side",
+      [&](const std::string& text) {
+        volume_resolution = parse::ParseInteger<int>("--volume-resolution", text, 1);
+        volume_given = true;
+      },
+      std::to_string(volume_resolution));
+  flags.Add("--min-inliers", &min_inliers, "F",
+            "tracking-quality inlier fraction threshold (-1: the library's)", 0, 1);
+  if (!flags.Parse(argc, argv)) return 0;
   if (json.empty()) throw UsageError("--json OUT is required");
   if (!peer.empty() && peer != "opencv") throw UsageError("--peer supports only 'opencv'");
   if (!sevenscenes.empty() == !sim_path.empty()) {
@@ -891,22 +878,5 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return Run(argc, argv);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
-    return 2;
-  } catch (const probeless::dataset::DatasetError& e) {
-    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
-    return 2;
-  } catch (const probeless::recon::ReconError& e) {
-    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
-    return 2;
-  } catch (const probeless::parse::NumberError& e) {
-    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "[error] fusion_eval: %s\n", e.what());
-    return 1;
-  }
+  return probeless::node::RunMain("fusion_eval", [&] { return Run(argc, argv); });
 }
