@@ -116,6 +116,7 @@
 #include "probeless/light/sim_buffers.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/flags.h"
 #include "probeless/parse/number.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
@@ -663,219 +664,214 @@ void WritePlots(const std::string& dir, const Series& full, const Series& fast) 
   cv::imwrite(dir + "/scene_light_lamps.png", lamps);
 }
 
+constexpr const char* kDescription =
+    "evaluates probeless_light's full (Ours) and fast (OursFast) variants through\n"
+    "light::ScenePipeline on simulated scenes (--sim) or a log (--log); --json OUT is required.\n"
+    "Every option in detail: the comment at the top of tools/scene_light_eval/main.cpp;\n"
+    "docs/light.md.";
+
 int Run(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw node::UsageError(a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "-h" || a == "--help") {
-      // The options are documented at the top of tools/scene_light_eval/main.cpp.
-      std::printf(
-          "usage: scene_light_eval [--sim SCENARIO.yaml | --log FILE.mcap] --json OUT\n"
-          "         [--plots DIR] [--frames N] [--directions N] [--bands B] [--aux]\n"
-          "         [--threads T] [--camera-truth] [--grey-world] [--quadrature] [--fused]\n"
-          "         [--mix] ...\n"
-          "  every option: the comment at the top of tools/scene_light_eval/main.cpp;\n"
-          "  docs/light.md\n");
-      return 0;
-    } else if (a == "--sim")
-      o.sim = value();
-    else if (a == "--log")
-      o.log = value();
-    else if (a == "--json")
-      o.json = value();
-    else if (a == "--plots")
-      o.plots = value();
-    else if (a == "--frames")
-      o.frames = parse::ParseInteger<int>(a, value());
-    else if (a == "--directions")
-      o.directions = parse::ParseInteger<int>(a, value());
-    else if (a == "--seed")
-      o.seed = parse::ParseInteger<uint64_t>(a, value());
-    else if (a == "--bands")
-      o.bands = parse::ParseInteger<int>(a, value());
-    else if (a == "--threads")
-      o.threads = parse::ParseInteger<int>(a, value());
-    else if (a == "--aux")
-      o.aux = true;
-    else if (a == "--aux-roles")
-      o.aux = true, o.aux_roles = value();
-    else if (a == "--aux-top-camera")
-      o.aux = o.aux_top_camera = true;
-    else if (a == "--aux-resolution")
-      o.aux = true, o.aux_resolution = parse::ParseInteger<int>(a, value());
-    else if (a == "--aux-standoff")
-      o.aux = true, o.aux_standoff = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--camera-truth")
-      o.camera_truth = true;
-    else if (a == "--grey-world")
-      o.grey_world = true;
-    else if (a == "--fused-shadows") {
-      const std::string m = value();
-      if (m != "raw" && m != "gr") throw node::UsageError("--fused-shadows must be raw or gr");
-      o.fused_shadows_raw = m == "raw";
-    } else if (a == "--invariant-albedo")
-      o.invariant_albedo = true;
-    else if (a == "--albedo-groups")
-      o.albedo_groups = parse::ParseInteger<int>(a, value());
-    else if (a == "--quadrature")
-      o.quadrature = true;
-    else if (a == "--fused")
-      o.fused = true;
-    else if (a == "--fused-known-pose")
-      o.fused = o.fused_known_pose = true;
-    else if (a == "--normal-filter")
-      o.normal_filter = true;
-    else if (a == "--filter-radius")
-      o.filter.radius = parse::ParseInteger<int>(a, value());
-    else if (a == "--filter-angle")
-      o.filter.max_neighbour_angle_deg = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--filter-view")
-      o.filter.max_view_angle_deg = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--filter-jump")
-      o.filter.max_plane_distance_rel = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--smooth-radius")
-      o.smooth_radius = parse::ParseInteger<int>(a, value());
-    else if (a == "--normal-step")
-      o.normal_step = parse::ParseInteger<int>(a, value());
-    else if (a == "--fused-volume")
-      o.fused = o.fused_volume = true;
-    else if (a == "--fused-normal-step")
-      o.fused_normal_step = parse::ParseInteger<int>(a, value());
-    else if (a == "--temporal")
-      o.temporal = parse::ParseInteger<int>(a, value());
-    else if (a == "--forgetting")
-      o.forgetting = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--no-balance")
-      o.no_balance = true;
-    else if (a == "--prior-weight") {
-      o.prior_weight = node::ParseNumberOption(a, value());
-      if (!(o.prior_weight >= 0)) throw node::UsageError("--prior-weight must be >= 0");
-    } else if (a == "--no-shadows-override-prior")
-      o.shadows_override_prior = false;
-    else if (a == "--mix")
-      o.mix = true;
-    else if (a == "--light-model") {
-      const std::string v = value();
-      try {
-        o.light_model = light::ParseLightModel(v);
-        o.light_model_set = true;
-      } catch (const light::LightError&) {
-        throw node::UsageError("--light-model must be distant, point or auto, got '" + v + "'");
-      }
-    } else if (a == "--no-shadows")
-      o.shadows = false;
-    else if (a == "--shadows")
-      o.shadows = true;
-    else if (a == "--fast-shadows")
-      o.fast_shadows = true;
-    else if (a == "--shadow-stride")
-      o.shadow.stride = parse::ParseInteger<int>(a, value());
-    else if (a == "--shadow-directions")
-      o.shadow.coarse_directions = parse::ParseInteger<int>(a, value());
-    else if (a == "--shadow-min-score")
-      o.shadow.min_score = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-min-gain")
-      o.shadow.min_gain = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-keep")
-      o.shadow.keep_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-cue-keep")
-      o.shadow.cue_keep_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-min-contrast")
-      o.shadow.min_contrast = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-behind-lit")
-      o.shadow.unknown_behind = false;
-    else if (a == "--shadow-steps")
-      o.shadow.march_steps = parse::ParseInteger<int>(a, value());
-    else if (a == "--shadow-thickness-steps")
-      o.shadow.thickness_steps = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-candidates")
-      o.shadow.candidates = parse::ParseInteger<int>(a, value());
-    else if (a == "--shadow-coarse-stride")
-      o.shadow.coarse_stride = parse::ParseInteger<int>(a, value());
-    else if (a == "--shadow-max-runner-up")
-      o.shadow.max_runner_up = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-bias")
-      o.shadow.depth_bias_m = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-bias-rel")
-      o.shadow.depth_bias_rel = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-thickness")
-      o.shadow.thickness_m = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-cues") {
-      o.shadow_cues = value();
-      if (o.shadow_cues != "depth" && o.shadow_cues != "all" && o.shadow_cues != "none") {
-        throw node::UsageError("--shadow-cues must be depth, all or none, got '" + o.shadow_cues +
-                               "'");
-      }
-    } else if (a == "--shadow-dark-ratio")
-      o.shadow.mask_dark_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-dark-weight")
-      o.shadow.unexplained_dark_weight = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-boundary-ref")
-      o.shadow.boundary_ref = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-boundary-ratio")
-      o.shadow.boundary_ratio = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--shadow-chroma")
-      o.shadow.chroma_cells = parse::ParseInteger<int>(a, value());
-    else if (a == "--lamps")
-      o.lamps = parse::ParseInteger<int>(a, value());
-    else if (a == "--point-rows")
-      o.point_rows = parse::ParseInteger<int>(a, value());
-    else if (a == "--legacy-normals")
-      o.depth_geometry.normals_from = light::DepthNormals::kCentral;
-    else if (a == "--edge-normals")
-      o.depth_geometry.normals_from = light::DepthNormals::kEdge;
-    else if (a == "--edge-noise-quad")
-      o.depth_geometry.normals.noise_quadratic =
-          static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--edge-threshold")
-      o.depth_geometry.normals.threshold_sigma =
-          static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--edge-radius")
-      o.depth_geometry.normals.min_radius_m =
-          static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--edge-view")
-      o.depth_geometry.normals.max_view_angle_deg =
-          static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--reliability")
-      o.reliability = true;
-    else if (a == "--no-screen")
-      o.point_screen = false;
-    else if (a == "--cold")
-      o.point_warm = false;
-    else if (a == "--screen-rows")
-      o.screen_rows = parse::ParseInteger<int>(a, value());
-    else if (a == "--screen-lm")
-      o.screen_lm = parse::ParseInteger<int>(a, value());
-    else if (a == "--warm-lm")
-      o.warm_lm = parse::ParseInteger<int>(a, value());
-    else if (a == "--fused-size")
-      o.fused_size = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--fused-resolution")
-      o.fused_resolution = parse::ParseInteger<int>(a, value());
-    else if (a == "--fused-truncation")
-      o.fused_truncation = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--fused-normal-gap")
-      o.fused_normal_gap = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--fused-gradient-step")
-      o.fused_gradient_step = static_cast<float>(node::ParseNumberOption(a, value()));
-    else if (a == "--fused-origin") {
-      const std::vector<double> v = parse::ParseDoubleList(a, value(), 3, 3);
-      for (int k = 0; k < 3; ++k) o.fused_origin[k] = static_cast<float>(v[k]);
-    } else if (a == "--fused-normals") {
-      const std::string v = value();
-      if (v != "depth" && v != "volume") {
-        throw node::UsageError("--fused-normals must be depth or volume, got '" + v + "'");
-      }
-      o.fused_volume_normals = v == "volume";
-    } else if (a == "--fused-step")
-      o.fused_step = parse::ParseInteger<int>(a, value());
-    else
-      throw node::UsageError("unknown option '" + a + "'");
-  }
+  node::FlagParser flags("scene_light_eval", kDescription);
+  // Input and output.
+  flags.Add("--sim", &o.sim, "SCENARIO.yaml", "render N frames of this scenario in-process");
+  flags.Add("--log", &o.log, "FILE.mcap", "sensor data and /groundtruth/light from a log instead");
+  flags.Add("--json", &o.json, "OUT", "the figures (required)");
+  flags.Add("--plots", &o.plots, "DIR", "lat-long maps and error / direction plots (PNG)");
+  flags.Add("--frames", &o.frames, "N", "frames spread evenly over the scenario");
+  flags.Add("--directions", &o.directions, "N", "SSDO directions (TransferOptions)");
+  flags.Add("--seed", &o.seed, "S", "TransferOptions::seed (the SSDO jitter)");
+  flags.Add("--bands", &o.bands, "B", "SH bands");
+  flags.Add("--threads", &o.threads, "T", "worker threads");
+  // Auxiliary views.
+  flags.Add("--aux", &o.aux, "add left/right/top orthographic views traced from the scene");
+  flags.AddCallback(
+      "--aux-roles", "STR", "keep the traced views whose letter (l, r, t) is in STR; implies --aux",
+      [&](const std::string& v) {
+        o.aux = true;
+        o.aux_roles = v;
+      },
+      o.aux_roles);
+  flags.AddSwitch(
+      "--aux-top-camera", [&] { o.aux = o.aux_top_camera = true; },
+      "the top view along the camera's +y; implies --aux");
+  flags.AddCallback(
+      "--aux-resolution", "N", "traced views' pixels per side (1..4096); implies --aux",
+      [&](const std::string& v) {
+        o.aux = true;
+        o.aux_resolution = parse::ParseInteger<int>("--aux-resolution", v);
+      },
+      std::to_string(o.aux_resolution));
+  flags.AddCallback(
+      "--aux-standoff", "M", "traced views' standoff (extent 2 M + 1.6 m); implies --aux",
+      [&](const std::string& v) {
+        o.aux = true;
+        o.aux_standoff = static_cast<float>(node::ParseNumberOption("--aux-standoff", v));
+      });
+  // Truth, albedo, transfer.
+  flags.Add("--camera-truth", &o.camera_truth, "score against the light at the camera");
+  flags.Add("--grey-world", &o.grey_world, "one uniform albedo (no chromaticity groups)");
+  flags.AddCallback(
+      "--fused-shadows", "raw|gr",
+      "the fused input's shadow search on the raw depth (the node's) or on G_r",
+      [&](const std::string& v) {
+        if (v != "raw" && v != "gr") throw node::UsageError("--fused-shadows must be raw or gr");
+        o.fused_shadows_raw = v == "raw";
+      },
+      "raw");
+  flags.Add("--invariant-albedo", &o.invariant_albedo, "EstimateOptions::albedo_invariant");
+  flags.Add("--albedo-groups", &o.albedo_groups, "N",
+            "chromaticity cells per axis (-1: the default, 32)");
+  flags.Add("--quadrature", &o.quadrature, "eq. 6 as printed (no analytic unoccluded transfer)");
+  // Fusion.
+  flags.Add("--fused", &o.fused,
+            "also run on fusion's G_r (in-process FusionPipeline; needs --sim)");
+  flags.AddSwitch(
+      "--fused-known-pose", [&] { o.fused = o.fused_known_pose = true; },
+      "--fused with the simulator's pose");
+  // Normals and temporal fit.
+  flags.Add("--normal-filter", &o.normal_filter,
+            "light::FilterNormals on sensor and fused G-buffers");
+  flags.Add("--filter-radius", &o.filter.radius, "R", "NormalFilterOptions::radius");
+  flags.Add("--filter-angle", &o.filter.max_neighbour_angle_deg, "DEG",
+            "NormalFilterOptions::max_neighbour_angle_deg");
+  flags.Add("--filter-view", &o.filter.max_view_angle_deg, "DEG",
+            "NormalFilterOptions::max_view_angle_deg");
+  flags.Add("--filter-jump", &o.filter.max_plane_distance_rel, "REL",
+            "NormalFilterOptions::max_plane_distance_rel");
+  flags.Add("--smooth-radius", &o.smooth_radius, "R",
+            "sensor depth smoothing (-1: DepthGeometry's)");
+  flags.Add("--normal-step", &o.normal_step, "S",
+            "normal step of the sensor depth (-1: DepthGeometry's)");
+  flags.AddSwitch(
+      "--fused-volume", [&] { o.fused = o.fused_volume = true; },
+      "--fused on G_v (the TSDF raycast) instead of G_r");
+  flags.Add("--fused-normal-step", &o.fused_normal_step, "S",
+            "normals from G_r's depth (0: fusion's)");
+  flags.Add("--temporal", &o.temporal, "N", "TemporalLightEstimator over N consecutive frames");
+  flags.Add("--forgetting", &o.forgetting, "F", "the temporal estimator's forgetting factor");
+  flags.Add("--no-balance", &o.no_balance, "no normal-orientation balancing (ablation)");
+  flags.AddCallback(
+      "--prior-weight", "W", "the light prior's weight (0 = off; -1: the node's)",
+      [&](const std::string& v) {
+        o.prior_weight = node::ParseNumberOption("--prior-weight", v);
+        if (!(o.prior_weight >= 0)) throw node::UsageError("--prior-weight must be >= 0");
+      },
+      "-1");
+  flags.AddSwitch(
+      "--no-shadows-override-prior", [&] { o.shadows_override_prior = false; },
+      "ScenePipelineOptions::shadows_override_prior false");
+  flags.Add("--mix", &o.mix, "score hybrids of clean and sensor inputs");
+  // Light model and point lamps.
+  flags.AddCallback(
+      "--light-model", "distant|point|auto",
+      "light::EstimateSceneLight's model (--temporal implies distant)",
+      [&](const std::string& v) {
+        try {
+          o.light_model = light::ParseLightModel(v);
+          o.light_model_set = true;
+        } catch (const light::LightError&) {
+          throw node::UsageError("--light-model must be distant, point or auto, got '" + v + "'");
+        }
+      },
+      "auto");
+  // Cast shadows.
+  flags.AddSwitch(
+      "--no-shadows", [&] { o.shadows = false; }, "no cast-shadow refinement");
+  flags.AddSwitch(
+      "--shadows", [&] { o.shadows = true; }, "cast-shadow refinement (the default)");
+  flags.Add("--fast-shadows", &o.fast_shadows, "the shadow search for OursFast too");
+  flags.Add("--shadow-stride", &o.shadow.stride, "N", "ShadowOptions::stride");
+  flags.Add("--shadow-directions", &o.shadow.coarse_directions, "N",
+            "ShadowOptions::coarse_directions");
+  flags.Add("--shadow-min-score", &o.shadow.min_score, "X", "ShadowOptions::min_score");
+  flags.Add("--shadow-min-gain", &o.shadow.min_gain, "X", "ShadowOptions::min_gain");
+  flags.Add("--shadow-keep", &o.shadow.keep_ratio, "X", "ShadowOptions::keep_ratio");
+  flags.Add("--shadow-cue-keep", &o.shadow.cue_keep_ratio, "X", "ShadowOptions::cue_keep_ratio");
+  flags.Add("--shadow-min-contrast", &o.shadow.min_contrast, "X", "ShadowOptions::min_contrast");
+  flags.AddSwitch(
+      "--shadow-behind-lit", [&] { o.shadow.unknown_behind = false; },
+      "ShadowOptions::unknown_behind false");
+  flags.Add("--shadow-steps", &o.shadow.march_steps, "N", "ShadowOptions::march_steps");
+  flags.Add("--shadow-thickness-steps", &o.shadow.thickness_steps, "X",
+            "ShadowOptions::thickness_steps");
+  flags.Add("--shadow-candidates", &o.shadow.candidates, "N", "ShadowOptions::candidates");
+  flags.Add("--shadow-coarse-stride", &o.shadow.coarse_stride, "N", "ShadowOptions::coarse_stride");
+  flags.Add("--shadow-max-runner-up", &o.shadow.max_runner_up, "X", "ShadowOptions::max_runner_up");
+  flags.Add("--shadow-bias", &o.shadow.depth_bias_m, "M", "ShadowOptions::depth_bias_m");
+  flags.Add("--shadow-bias-rel", &o.shadow.depth_bias_rel, "X", "ShadowOptions::depth_bias_rel");
+  flags.Add("--shadow-thickness", &o.shadow.thickness_m, "M", "ShadowOptions::thickness_m");
+  flags.AddCallback(
+      "--shadow-cues", "depth|all|none",
+      "the image cues of the search: raw sensor depth (the node), all inputs, none",
+      [&](const std::string& v) {
+        o.shadow_cues = v;
+        if (o.shadow_cues != "depth" && o.shadow_cues != "all" && o.shadow_cues != "none") {
+          throw node::UsageError("--shadow-cues must be depth, all or none, got '" + o.shadow_cues +
+                                 "'");
+        }
+      },
+      o.shadow_cues);
+  flags.Add("--shadow-dark-ratio", &o.shadow.mask_dark_ratio, "X",
+            "ShadowOptions::mask_dark_ratio");
+  flags.Add("--shadow-dark-weight", &o.shadow.unexplained_dark_weight, "X",
+            "ShadowOptions::unexplained_dark_weight");
+  flags.Add("--shadow-boundary-ref", &o.shadow.boundary_ref, "X", "ShadowOptions::boundary_ref");
+  flags.Add("--shadow-boundary-ratio", &o.shadow.boundary_ratio, "X",
+            "ShadowOptions::boundary_ratio");
+  flags.Add("--shadow-chroma", &o.shadow.chroma_cells, "N", "ShadowOptions::chroma_cells");
+  flags.Add("--lamps", &o.lamps, "K", "point lamps (1 or 2)");
+  flags.Add("--point-rows", &o.point_rows, "N", "PointLightOptions::max_rows (0 = its default)");
+  // Depth-mode geometry.
+  flags.AddSwitch(
+      "--legacy-normals", [&] { o.depth_geometry.normals_from = light::DepthNormals::kCentral; },
+      "always round 2's normals");
+  flags.AddSwitch(
+      "--edge-normals", [&] { o.depth_geometry.normals_from = light::DepthNormals::kEdge; },
+      "always the edge-aware normals");
+  flags.Add("--edge-noise-quad", &o.depth_geometry.normals.noise_quadratic, "Q",
+            "DepthNormalOptions::noise_quadratic");
+  flags.Add("--edge-threshold", &o.depth_geometry.normals.threshold_sigma, "T",
+            "DepthNormalOptions::threshold_sigma");
+  flags.Add("--edge-radius", &o.depth_geometry.normals.min_radius_m, "M",
+            "DepthNormalOptions::min_radius_m");
+  flags.Add("--edge-view", &o.depth_geometry.normals.max_view_angle_deg, "DEG",
+            "DepthNormalOptions::max_view_angle_deg");
+  flags.Add("--reliability", &o.reliability,
+            "the normals' reliability as the estimator's row weights");
+  flags.AddSwitch(
+      "--no-screen", [&] { o.point_screen = false; }, "PointLightOptions::screen_rows 0");
+  flags.AddSwitch(
+      "--cold", [&] { o.point_warm = false; }, "ScenePipelineOptions::point_warm_start false");
+  flags.Add("--screen-rows", &o.screen_rows, "N", "PointLightOptions::screen_rows (-1 = default)");
+  flags.Add("--screen-lm", &o.screen_lm, "N",
+            "PointLightOptions::screen_lm_iterations (-1 = default)");
+  flags.Add("--warm-lm", &o.warm_lm, "N", "PointLightOptions::warm_lm_iterations (-1 = default)");
+  // Fusion configuration (defaults: launch/demo_scene.yaml's fusion node).
+  flags.Add("--fused-size", &o.fused_size, "M", "volume side (m)");
+  flags.Add("--fused-resolution", &o.fused_resolution, "N", "voxels per side");
+  flags.Add("--fused-truncation", &o.fused_truncation, "M", "TSDF truncation (m)");
+  flags.Add("--fused-normal-gap", &o.fused_normal_gap, "M", "FusionOptions normal gap (m)");
+  flags.Add("--fused-gradient-step", &o.fused_gradient_step, "V",
+            "FusionOptions gradient step (voxels)");
+  flags.AddCallback(
+      "--fused-origin", "X,Y,Z", "volume corner (m, the first camera's frame)",
+      [&](const std::string& v) {
+        const std::vector<double> xyz = parse::ParseDoubleList("--fused-origin", v, 3, 3);
+        for (int k = 0; k < 3; ++k) o.fused_origin[k] = static_cast<float>(xyz[k]);
+      },
+      "-3,-3,0.3");
+  flags.AddCallback(
+      "--fused-normals", "depth|volume", "FusionOptions::normal_source",
+      [&](const std::string& v) {
+        if (v != "depth" && v != "volume") {
+          throw node::UsageError("--fused-normals must be depth or volume, got '" + v + "'");
+        }
+        o.fused_volume_normals = v == "volume";
+      },
+      "depth");
+  flags.Add("--fused-step", &o.fused_step, "S", "integrate every S-th frame");
+  if (!flags.Parse(argc, argv)) return 0;
   if (o.json.empty()) throw node::UsageError("--json OUT is required");
   if (o.frames < 1) throw node::UsageError("--frames must be >= 1");
   if (o.fused_step < 1) throw node::UsageError("--fused-step must be >= 1");
