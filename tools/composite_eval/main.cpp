@@ -34,6 +34,7 @@
 #include "probeless/eval/metrics.h"
 #include "probeless/eval/scene_folder.h"
 #include "probeless/msgs/image.h"
+#include "probeless/node/flags.h"
 #include "probeless/rectify/rectify.h"
 #include "scene_prep.h"
 
@@ -47,9 +48,7 @@ constexpr const char* kUsage =
     "[--sheets DIR] [--light-param NAME:=VALUE]... [--no-focus] [--keep-work]";
 constexpr int kProxyStride = 6;  // px between the scene proxy's vertices (2.5-4 cm at 2-3 m)
 
-struct UsageError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
+using node::UsageError;
 
 // SIGINT/SIGTERM during a scene: the graph was stopped; the tool cleans up and exits 130.
 struct Interrupted {};
@@ -65,50 +64,52 @@ struct Options {
   bool keep_work = false;  // keep the work folder (logs of every node, the MCAP sources)
 };
 
-Options ParseOptions(int argc, char** argv) {
+// The options of the command line; nothing after --help (the generated usage is printed).
+// Throws UsageError.
+std::optional<Options> ParseOptions(int argc, char** argv) {
   Options o;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw UsageError("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--scenes") {
-      o.scenes = value();
-    } else if (a == "--json") {
-      o.json = value();
-    } else if (a == "--sheets") {
-      o.sheets = value();
-    } else if (a == "--mode") {
-      o.mode = value();
-      if (o.mode != "gbuffer" && o.mode != "depth") {
-        throw UsageError("--mode: expected gbuffer or depth, got '" + o.mode + "'");
-      }
-    } else if (a == "--only") {
-      std::stringstream list(value());
-      for (std::string name; std::getline(list, name, ',');) {
-        if (!name.empty()) o.only.push_back(name);
-      }
-    } else if (a == "--light-param") {
-      const std::string rule = value();
-      const size_t sep = rule.find(":=");
-      if (sep == std::string::npos || sep == 0 ||
-          rule.find_first_of(" '\"\\") != std::string::npos) {
-        throw UsageError("--light-param: expected NAME:=VALUE without spaces or quotes, got '" +
-                         rule + "'");
-      }
-      o.light_params.push_back(rule);
-    } else if (a == "--keep-work") {
-      o.keep_work = true;
-    } else if (a == "--no-focus") {
-      o.focus = false;
-    } else if (a == "-h" || a == "--help") {
-      std::cout << kUsage << "\n";
-      std::exit(0);
-    } else {
-      throw UsageError("unknown option '" + a + "'");
-    }
-  }
+  node::FlagParser flags(
+      "composite_eval",
+      "does an inserted virtual object look like a real one would in that place? Runs the real\n"
+      "graph on each scene folder and compares /render/composite (ours, oracle, baseline) with\n"
+      "the scene's rgb_inserted/ frames (docs/evaluation.md); --scenes and --json are required.\n"
+      "Exit: 0 done; 2 bad command line or scene folder; 1 a graph failed; 130 interrupted.");
+  flags.Add("--scenes", &o.scenes, "DIR", "a folder of scene folders");
+  flags.AddCallback("--only", "NAME,...", "only these scene folders (repeatable)",
+                    [&](const std::string& text) {
+                      std::stringstream list(text);
+                      for (std::string name; std::getline(list, name, ',');) {
+                        if (!name.empty()) o.only.push_back(name);
+                      }
+                    });
+  flags.AddCallback(
+      "--mode", "gbuffer|depth", "scene_light's input: fusion's G_r or the depth image",
+      [&](const std::string& mode) {
+        if (mode != "gbuffer" && mode != "depth") {
+          throw UsageError("--mode: expected gbuffer or depth, got '" + mode + "'");
+        }
+        o.mode = mode;
+      },
+      o.mode);
+  flags.Add("--json", &o.json, "OUT", "the figures");
+  flags.Add("--sheets", &o.sheets, "DIR", "labelled contact sheets per scene");
+  flags.AddCallback(
+      "--light-param", "NAME:=VALUE", "a scene_light param override (repeatable)",
+      [&](const std::string& rule) {
+        const size_t sep = rule.find(":=");
+        if (sep == std::string::npos || sep == 0 ||
+            rule.find_first_of(" '\"\\") != std::string::npos) {
+          throw UsageError("--light-param: expected NAME:=VALUE without spaces or quotes, got '" +
+                           rule + "'");
+        }
+        o.light_params.push_back(rule);
+      });
+  flags.AddSwitch(
+      "--no-focus", [&] { o.focus = false; },
+      "scene_light without the objects' centre as its focus");
+  flags.Add("--keep-work", &o.keep_work,
+            "keep the work folder (logs of every node, the MCAP sources)");
+  if (!flags.Parse(argc, argv)) return std::nullopt;
   if (o.scenes.empty()) throw UsageError("--scenes DIR is required");
   if (o.json.empty()) throw UsageError("--json OUT is required");
   return o;
@@ -637,7 +638,9 @@ void WriteJson(const std::string& path, const Options& options,
 int Run(int argc, char** argv) {
   Options options;
   try {
-    options = ParseOptions(argc, argv);
+    const std::optional<Options> parsed = ParseOptions(argc, argv);
+    if (!parsed) return 0;
+    options = *parsed;
   } catch (const UsageError& e) {
     std::cerr << "composite_eval: " << e.what() << "\n" << kUsage << "\n";
     return 2;
