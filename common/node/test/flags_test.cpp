@@ -207,11 +207,11 @@ TEST(FlagParser, Positionals) {
   flags.AddPositional("IN", &input, "input mesh");
   flags.AddPositional("OUT", &output, "output");
   flags.AddPositionals("EXTRA", &rest, "more");
-  const char* argv[] = {"tool", "a", "--quiet", "b", "c", "d"};
-  EXPECT_TRUE(flags.Parse(6, argv));
+  const char* argv[] = {"tool", "a", "--quiet", "b", "c", "-", "d"};
+  EXPECT_TRUE(flags.Parse(7, argv));
   EXPECT_EQ(input, "a");
   EXPECT_EQ(output, "b");
-  EXPECT_EQ(rest, (std::vector<std::string>{"c", "d"}));
+  EXPECT_EQ(rest, (std::vector<std::string>{"c", "-", "d"}));  // "-" (stdin) is an argument
   EXPECT_TRUE(quiet);
   EXPECT_TRUE(flags.Given("IN"));
 

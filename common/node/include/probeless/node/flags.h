@@ -17,11 +17,12 @@
 //     return node::RunMain("face_track_bench", [&] { return Run(argc, argv); });
 //   }
 //
-// Grammar: a flag with a value is written "--x VALUE" or "--x=VALUE" (the next argument is the
-// value whatever it looks like, so "--offset -3" works); a switch is "--x" alone; "-h" and
-// "--help" print the usage; anything not starting with '-' is a positional argument (when the tool
-// declares some). Flags may come in any order and be repeated: the last value wins, except for
-// repeatable flags (a std::vector target), which collect every value in order.
+// Grammar: a flag with a value is written "--x VALUE" or "--x=VALUE" (the name ends at the first
+// '='; the next argument is the value whatever it looks like, so "--offset -3" works); a switch is
+// "--x" alone; "-h" and "--help" print the usage; anything not starting with '-', and "-" itself,
+// is a positional argument (when the tool declares some). Flags may come in any order and be
+// repeated: the last value wins, except for repeatable flags (a std::vector target), which collect
+// every value in order.
 //
 // Errors: every malformed command line throws UsageError (exit code 2 through RunMain) with one
 // line naming the flag: "unknown option '--foo' (see --help)", "--scenes needs a value DIR",
@@ -39,6 +40,7 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 #include "probeless/node/main.h"
@@ -47,8 +49,9 @@
 namespace probeless::node {
 
 // A tool's flags and positional arguments, bound to variables that keep their value when the flag
-// is not given (that value is shown as the default in the usage). Declare everything, then Parse
-// once. Not thread-safe; the bound variables must outlive Parse.
+// is not given (that value, when not empty, is shown as the default in the usage; switches show
+// none). Declare everything, then Parse once. Not thread-safe; the bound variables must outlive
+// Parse.
 class FlagParser {
  public:
   // `program` is the name in the usage line ("usage: <program> [options] ..."); `description`
