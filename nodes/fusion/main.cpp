@@ -41,13 +41,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <deque>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
+#include "probeless/node/stamp_cache.h"
 #include "probeless/recon/checkpoint.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
@@ -64,7 +64,6 @@ struct PendingDepth {
 };
 
 struct PendingImage {
-  int64_t stamp_ns = 0;
   msgs::Image image;
   std::vector<std::byte> payload;
   recon::GreyImage grey;
@@ -187,12 +186,12 @@ int Run(int argc, char** argv) {
   }
   // Poses of the last frames by stamp (to bring scene/light's camera-frame direction into the
   // world) and the light direction in the world (none until scene/light brings one).
-  std::deque<std::pair<int64_t, recon::Pose>> recent_poses;
+  node::StampCache<recon::Pose> recent_poses(32);
   std::optional<recon::Vec3f> light_world;
 
   std::optional<msgs::CameraInfo> info;
   std::optional<PendingDepth> pending_depth;
-  std::optional<PendingImage> last_image;
+  node::StampCache<PendingImage> last_image(1);  // the latest image, taken by exact stamp
   uint64_t frames = 0, tracked_frames = 0, uncertain_frames = 0, lost_frames = 0,
            relocalisations = 0;
   recon::TrackingState last_state = recon::TrackingState::kTracking;
@@ -268,8 +267,7 @@ int Run(int argc, char** argv) {
       out->SetChildFrameId(d.header.FrameId());
       out->transform = r.camera_to_world.ToMsg();
       pose_pub.Publish(std::move(loan));
-      recent_poses.emplace_back(d.header.stamp_ns, r.camera_to_world);
-      if (recent_poses.size() > 32) recent_poses.pop_front();
+      recent_poses.Add(d.header.stamp_ns, r.camera_to_world);
       if (aux_pub) {
         // Before the G_r, so a subscriber finds the views when the G_r arrives.
         const std::vector<recon::AuxiliaryRaycast> views =
@@ -326,8 +324,8 @@ int Run(int argc, char** argv) {
     d.intrinsics = recon::IntrinsicsFromCameraInfo(*info);
     recon::DepthFromImage(*m, m.payload, info->depth_scale, options.preprocess.depth_min_m,
                           options.preprocess.depth_max_m, d.depth);
-    if (last_image && last_image->stamp_ns == d.stamp_ns) {
-      process(d, &*last_image);
+    if (const PendingImage* image = last_image.Exact(d.stamp_ns)) {
+      process(d, image);
     } else {
       pending_depth = std::move(d);
     }
@@ -335,15 +333,15 @@ int Run(int argc, char** argv) {
   auto on_image = [&](bus::Sample&& s) {
     const auto m = msgs::ReadMessage<msgs::Image>(s.data());
     PendingImage img;
-    img.stamp_ns = m->header.stamp_ns;
     img.image = *m;
     recon::GreyFromImage(*m, m.payload, img.grey);
     img.payload.assign(m.payload.begin(), m.payload.begin() + m->PayloadBytes());
-    last_image = std::move(img);
-    if (pending_depth && pending_depth->stamp_ns == last_image->stamp_ns) {
+    last_image.Add(m->header.stamp_ns, std::move(img));
+    const PendingImage* image = pending_depth ? last_image.Exact(pending_depth->stamp_ns) : nullptr;
+    if (image != nullptr) {
       PendingDepth waiting = std::move(*pending_depth);
       pending_depth.reset();
-      process(waiting, &*last_image);
+      process(waiting, image);
     }
   };
   auto guarded = [&](auto fn) {
@@ -374,7 +372,7 @@ int Run(int argc, char** argv) {
            integrated_since_checkpoint = 0;
          }
          pending_depth.reset();
-         recent_poses.clear();
+         recent_poses.Clear();
          light_world.reset();
          last_state = recon::TrackingState::kTracking;  // a new map starts tracked
          node.Info() << "reset: map cleared";
@@ -386,9 +384,8 @@ int Run(int argc, char** argv) {
                           const float* dir = m->dominant_direction;
                           const float len2 = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
                           if (!(len2 > 1e-6f) || !std::isfinite(len2)) return;  // none
-                          for (const auto& [stamp, pose] : recent_poses) {
-                            if (stamp != m->header.stamp_ns) continue;
-                            light_world = recon::Normalized(pose.Rotate({dir[0], dir[1], dir[2]}));
+                          if (const recon::Pose* pose = recent_poses.Exact(m->header.stamp_ns)) {
+                            light_world = recon::Normalized(pose->Rotate({dir[0], dir[1], dir[2]}));
                             return;
                           }
                           node.Debug() << "scene/light for an unknown stamp: ignored";

@@ -70,6 +70,7 @@
 #include "probeless/light/pipeline.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
+#include "probeless/node/stamp_cache.h"
 
 namespace {
 
@@ -239,11 +240,11 @@ int Run(int argc, char** argv) {
   if (!focus.empty()) {
     pose_sub.emplace(node.CreateSubscriber<msgs::Pose>("scene/pose", {.queue_depth = 8}));
   }
-  std::deque<msgs::Pose> poses;  // the latest camera poses, oldest first
+  node::StampCache<msgs::Pose> poses(8);  // the latest camera poses
   int64_t focus_used = 0, focus_missing = 0;
   auto hold_pose = [&](bus::Sample&& s) {
-    poses.push_back(*msgs::ReadMessage<msgs::Pose>(s.data()));
-    if (poses.size() > 8) poses.pop_front();
+    const msgs::Pose pose = *msgs::ReadMessage<msgs::Pose>(s.data());
+    poses.Add(pose.header.stamp_ns, pose);
   };
 
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
@@ -256,31 +257,21 @@ int Run(int argc, char** argv) {
   if (raw_shadows) {
     raw_depth_sub.emplace(node.CreateSubscriber<msgs::Image>("camera/depth", {.queue_depth = 8}));
   }
-  constexpr size_t kRawDepthKept =
-      8;              // copies not yet matched (older than a processed G_r: dropped)
-  struct HeldDepth {  // a copy of a camera/depth message, 64-byte aligned as msgs::ReadMessage
-                      // needs
-    int64_t stamp_ns = 0;
-    std::vector<std::byte> storage;
-    size_t offset = 0, size = 0;
-    std::span<const std::byte> bytes() const { return {storage.data() + offset, size}; }
-  };
-  std::deque<HeldDepth> raw_depths;  // oldest first
+  // Copies not yet matched (older than a processed G_r: dropped).
+  node::StampCache<node::HeldMessage> raw_depths(8);
   std::vector<float> raw_depth_m;
   int64_t raw_used = 0, raw_missing = 0, raw_size_mismatch = 0;
   auto hold_depth = [&](bus::Sample&& s) {
     const auto d = msgs::ReadMessage<msgs::Image>(s.data());
-    const auto bytes = s.data();
-    HeldDepth held;
-    held.stamp_ns = d->header.stamp_ns;
-    held.storage.resize(bytes.size() + msgs::kPayloadAlignment);
-    const auto address = reinterpret_cast<uintptr_t>(held.storage.data());
-    held.offset =
-        (msgs::kPayloadAlignment - address % msgs::kPayloadAlignment) % msgs::kPayloadAlignment;
-    held.size = bytes.size();
-    std::copy(bytes.begin(), bytes.end(), held.storage.begin() + held.offset);
-    raw_depths.push_back(std::move(held));
-    if (raw_depths.size() > kRawDepthKept) raw_depths.pop_front();
+    raw_depths.Add(d->header.stamp_ns, node::HeldMessage(s.data()));
+  };
+  // Takes (and acks, as Spin would) the samples of `sub` Spin has not handed over yet.
+  auto take_queued = [&](bus::Subscriber& sub, auto& hold) {
+    while (auto s = sub.TryTake()) {
+      const bus::MessageInfo received = s->info();
+      hold(std::move(*s));
+      node.Ack(sub, received);
+    }
   };
   // Taken in the G_r's handler (matched by stamp), not by Spin.
   std::optional<bus::Subscriber> aux_sub;
@@ -381,7 +372,7 @@ int Run(int argc, char** argv) {
     // (the pipeline resets its own state).
     if (header.stamp_ns < last_stamp) {
       aux_queue.clear();
-      raw_depths.clear();
+      raw_depths.Clear();
     }
     last_stamp = header.stamp_ns;
     std::optional<bus::Sample> aux_sample;
@@ -410,21 +401,16 @@ int Run(int argc, char** argv) {
     }
     if (raw_shadows) {
       // The shadow search's geometry: the depth image with the G_r's stamp (else G_r). Depth
-      // images Spin has not handed over yet are taken (and acked) here, as Spin would.
-      while (auto s = raw_depth_sub->TryTake()) {
-        const bus::MessageInfo received = s->info();
-        hold_depth(std::move(*s));
-        node.Ack(*raw_depth_sub, received);
-      }
-      const auto it = std::find_if(raw_depths.begin(), raw_depths.end(),
-                                   [&](const auto& d) { return d.stamp_ns == header.stamp_ns; });
-      if (it == raw_depths.end()) {
+      // images Spin has not handed over yet are taken here.
+      take_queued(*raw_depth_sub, hold_depth);
+      const node::HeldMessage* held = raw_depths.Exact(header.stamp_ns);
+      if (held == nullptr) {
         if (raw_missing == 0) {
           node.Warn() << "no camera/depth with the G_r's stamp " << header.stamp_ns
                       << ": the shadow search uses G_r for such frames";
         }
         ++raw_missing;
-      } else if (const auto d = msgs::ReadMessage<msgs::Image>(it->bytes());
+      } else if (const auto d = msgs::ReadMessage<msgs::Image>(held->bytes());
                  static_cast<int>(d->width) != frame.width ||
                  static_cast<int>(d->height) != frame.height) {
         if (raw_size_mismatch == 0) {
@@ -440,20 +426,12 @@ int Run(int argc, char** argv) {
         ++raw_used;
       }
       // Depth images up to this G_r's stamp can match no later G_r.
-      std::erase_if(raw_depths, [&](const HeldDepth& d) { return d.stamp_ns <= header.stamp_ns; });
+      raw_depths.DropUpTo(header.stamp_ns);
     }
     if (pose_sub) {
       // The pose of this frame (fusion publishes it before its G_r), else the newest older one.
-      while (auto s = pose_sub->TryTake()) {
-        const bus::MessageInfo received = s->info();
-        hold_pose(std::move(*s));
-        node.Ack(*pose_sub, received);
-      }
-      const msgs::Pose* pose = nullptr;
-      for (const msgs::Pose& p : poses) {
-        if (p.header.stamp_ns <= header.stamp_ns) pose = &p;
-      }
-      if (pose != nullptr) {
+      take_queued(*pose_sub, hold_pose);
+      if (const msgs::Pose* pose = poses.LatestAtOrBefore(header.stamp_ns)) {
         frame.focus = light::WorldPointInCamera(pose->transform, {focus[0], focus[1], focus[2]});
         ++focus_used;
       } else {
