@@ -58,7 +58,6 @@
 // otherwise.
 #include "probeless/node/main.h"
 
-#include <algorithm>
 #include <chrono>
 #include <deque>
 #include <limits>
@@ -66,6 +65,7 @@
 #include <string>
 #include <vector>
 
+#include "outputs.h"
 #include "probeless/light/messages.h"
 #include "probeless/light/pipeline.h"
 #include "probeless/msgs/msgs.h"
@@ -315,9 +315,7 @@ int Run(int argc, char** argv) {
       }
     }
   };
-  bus::Publisher light_pub = node.CreatePublisher<msgs::ShLight>("scene/light");
-  std::optional<bus::Publisher> transfer_pub, indirect_pub;
-  size_t transfer_capacity = 0, indirect_capacity = 0;
+  scene_light::SceneOutputs outputs(node, publish_transfer);
 
   std::optional<msgs::CameraInfo> info;
   std::optional<bus::Sample> image;  // the latest image sample (held)
@@ -443,7 +441,6 @@ int Run(int argc, char** argv) {
       }
     }
     const light::ScenePipelineResult& r = pipeline.Process(frame);
-    const light::LightEstimate& e = r.light;
     if (r.used == light::LightModel::kPoint && !r.point.lamps.empty()) {
       const auto& p = r.point.lamps[0].position;
       node.Debug() << "frame " << header.sequence << ": point model, lamp at (" << p[0] << ", "
@@ -459,50 +456,7 @@ int Run(int argc, char** argv) {
                    << r.clipped_filled << " clipped pixels given their surface's colour";
     }
     ++frames;
-    if (e.valid) {
-      bus::Loan loan = light_pub.Borrow(sizeof(msgs::ShLight));
-      auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
-      out->header = header;
-      light::FillShLight(e, out.message);
-      for (auto& coefficient : out.message->coefficients) {  // white -> the illuminant's colour
-        for (int c = 0; c < 3; ++c) coefficient[c] *= r.colour[c];
-      }
-      light_pub.Publish(std::move(loan));
-      ++published;
-    }
-    const light::TransferResult& result = *r.transfer;
-    if (publish_transfer) {
-      const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
-      const size_t bytes = msgs::TransferBuffer::MessageBytesFor(w, h, cc);
-      if (!transfer_pub || bytes > transfer_capacity) {
-        transfer_pub.reset();
-        transfer_pub.emplace(node.CreatePublisher<msgs::TransferBuffer>(
-            "scene/transfer", {.max_message_bytes = bytes}));
-        transfer_capacity = bytes;
-      }
-      bus::Loan loan = transfer_pub->Borrow(bytes);
-      auto out = msgs::WriteMessage<msgs::TransferBuffer>(loan.data());
-      out->header = header;
-      out->Init(w, h, cc);
-      const auto dst = msgs::TransferCoefficients(*out.message, out.payload);
-      std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
-      transfer_pub->Publish(std::move(loan));
-    }
-    if (r.has_indirect) {
-      const size_t bytes =
-          msgs::Image::MessageBytesFor(result.width, result.height, msgs::Encoding::kRgb32f);
-      if (!indirect_pub || bytes > indirect_capacity) {
-        indirect_pub.reset();
-        indirect_pub.emplace(
-            node.CreatePublisher<msgs::Image>("scene/indirect", {.max_message_bytes = bytes}));
-        indirect_capacity = bytes;
-      }
-      bus::Loan loan = indirect_pub->Borrow(bytes);
-      auto out = msgs::WriteMessage<msgs::Image>(loan.data());
-      out->header = header;
-      light::FillIndirectImage(result, out.message, out.payload);
-      indirect_pub->Publish(std::move(loan));
-    }
+    published += outputs.Publish(header, r);
   };
 
   std::vector<node::Handler> handlers{
