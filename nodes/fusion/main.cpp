@@ -45,6 +45,7 @@
 #include <string>
 #include <vector>
 
+#include "outputs.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 #include "probeless/node/stamp_cache.h"
@@ -171,18 +172,10 @@ int Run(int argc, char** argv) {
   bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
   bus::Subscriber info_sub = node.CreateSubscriber<msgs::CameraInfo>("camera/camera_info");
   bus::Subscriber reset_sub = node.CreateSubscriber<msgs::Header>("~/reset");
-  std::optional<bus::Publisher> gbuffer_pub;
-  uint32_t gbuffer_w = 0, gbuffer_h = 0;
-  bus::Publisher tracking_pub = node.CreatePublisher<msgs::TrackingStatus>("scene/tracking");
-  bus::Publisher pose_pub = node.CreatePublisher<msgs::Pose>("scene/pose");
-  std::optional<bus::Publisher> aux_pub;
+  fusion::FusionOutputs outputs(node, world_frame, publish_aux ? aux_pixels : 0);
   std::optional<bus::Subscriber> light_sub;
-  if (publish_aux) {
-    bus::PublisherOptions po;
-    po.max_message_bytes = msgs::AuxiliaryViews::MessageBytesFor(
-        4, static_cast<uint32_t>(aux_pixels), static_cast<uint32_t>(aux_pixels));
-    aux_pub.emplace(node.CreatePublisher<msgs::AuxiliaryViews>("scene/aux", po));
-    if (aux_light) light_sub.emplace(node.CreateSubscriber<msgs::ShLight>("scene/light"));
+  if (publish_aux && aux_light) {
+    light_sub.emplace(node.CreateSubscriber<msgs::ShLight>("scene/light"));
   }
   // Poses of the last frames by stamp (to bring scene/light's camera-frame direction into the
   // world) and the light direction in the world (none until scene/light brings one).
@@ -232,75 +225,23 @@ int Run(int argc, char** argv) {
       }
       last_state = r.state;
     }
-    {
-      bus::Loan loan = tracking_pub.Borrow(sizeof(msgs::TrackingStatus));
-      auto t = msgs::WriteMessage<msgs::TrackingStatus>(loan.data());
-      t->header = d.header;
-      t->state = r.state == recon::TrackingState::kLost ? msgs::TrackingStatusState::kLost
-                 : r.state == recon::TrackingState::kUncertain
-                     ? msgs::TrackingStatusState::kUncertain
-                     : msgs::TrackingStatusState::kTracked;
-      t->score = r.quality.score;
-      t->reasons = r.quality.reasons;
-      t->integrated = r.integrated ? 1 : 0;
-      t->relocalised = r.relocalised ? 1 : 0;
-      t->rms_m = r.icp.rms_m;
-      t->inlier_fraction = r.icp.inlier_fraction;
-      t->residual_ratio = r.quality.residual_ratio;
-      t->inlier_ratio = r.quality.inlier_ratio;
-      t->motion_translation_m = r.quality.motion_translation_m;
-      t->motion_rotation_deg = r.quality.motion_rotation_deg;
-      t->observability = r.quality.observability;
-      t->frames = frames;
-      t->tracked_frames = tracked_frames;
-      t->uncertain_frames = uncertain_frames;
-      t->lost_frames = lost_frames;
-      t->relocalisations = relocalisations;
-      t->SetReasonText(r.quality.text);
-      tracking_pub.Publish(std::move(loan));
-    }
+    outputs.PublishTracking(
+        d.header, r, {frames, tracked_frames, uncertain_frames, lost_frames, relocalisations});
     if (r.state != recon::TrackingState::kLost) {
-      bus::Loan loan = pose_pub.Borrow(sizeof(msgs::Pose));
-      auto out = msgs::WriteMessage<msgs::Pose>(loan.data());
-      out->header = d.header;
-      out->SetParentFrameId(world_frame);
-      out->SetChildFrameId(d.header.FrameId());
-      out->transform = r.camera_to_world.ToMsg();
-      pose_pub.Publish(std::move(loan));
+      outputs.PublishPose(d.header, r.camera_to_world);
       recent_poses.Add(d.header.stamp_ns, r.camera_to_world);
-      if (aux_pub) {
-        // Before the G_r, so a subscriber finds the views when the G_r arrives.
-        const std::vector<recon::AuxiliaryRaycast> views =
+      if (outputs.has_aux()) {
+        outputs.PublishAux(
+            d.header, r.camera_to_world,
             recon::RaycastAuxiliaryViews(pipeline.volume(), r.camera_to_world, aux_pixels,
-                                         light_world ? &*light_world : nullptr, pipeline.pool());
-        const uint32_t n = static_cast<uint32_t>(aux_pixels);
-        bus::Loan aux_loan = aux_pub->Borrow(
-            msgs::AuxiliaryViews::MessageBytesFor(static_cast<uint32_t>(views.size()), n, n));
-        auto aux = msgs::WriteMessage<msgs::AuxiliaryViews>(aux_loan.data());
-        aux->header = d.header;
-        recon::WriteAuxiliaryViews(r.camera_to_world, views, *aux, aux.payload);
-        aux_pub->Publish(std::move(aux_loan));
+                                         light_world ? &*light_world : nullptr, pipeline.pool()));
       }
     }
     if (options.merge_enabled) {
-      const uint32_t w = static_cast<uint32_t>(d.depth.width),
-                     h = static_cast<uint32_t>(d.depth.height);
-      if (!gbuffer_pub || gbuffer_w != w || gbuffer_h != h) {
-        bus::PublisherOptions po;
-        po.max_message_bytes = msgs::GeometryBuffer::MessageBytesFor(w, h);
-        gbuffer_pub.reset();
-        gbuffer_pub.emplace(node.CreatePublisher<msgs::GeometryBuffer>("scene/gbuffer", po));
-        gbuffer_w = w;
-        gbuffer_h = h;
-      }
-      bus::Loan loan = gbuffer_pub->Borrow(msgs::GeometryBuffer::MessageBytesFor(w, h));
-      auto out = msgs::WriteMessage<msgs::GeometryBuffer>(loan.data());
-      out->header = d.header;
-      recon::WriteGeometryBuffer(
+      outputs.PublishGeometry(
+          d.header, static_cast<uint32_t>(d.depth.width), static_cast<uint32_t>(d.depth.height),
           pipeline.merged().denoised, pipeline.merged_normals(), image ? &image->image : nullptr,
-          image ? std::span<const std::byte>(image->payload) : std::span<const std::byte>(), *out,
-          out.payload);
-      gbuffer_pub->Publish(std::move(loan));
+          image ? std::span<const std::byte>(image->payload) : std::span<const std::byte>());
     }
   };
 

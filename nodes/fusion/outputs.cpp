@@ -1,0 +1,88 @@
+#include "outputs.h"
+
+#include <utility>
+
+namespace probeless::fusion {
+
+FusionOutputs::FusionOutputs(node::Node& node, std::string world_frame, int aux_pixels)
+    : node_(node),
+      world_frame_(std::move(world_frame)),
+      tracking_pub_(node.CreatePublisher<msgs::TrackingStatus>("scene/tracking")),
+      pose_pub_(node.CreatePublisher<msgs::Pose>("scene/pose")) {
+  if (aux_pixels > 0) {
+    aux_pixels_ = static_cast<uint32_t>(aux_pixels);
+    bus::PublisherOptions po;
+    po.max_message_bytes = msgs::AuxiliaryViews::MessageBytesFor(4, aux_pixels_, aux_pixels_);
+    aux_pub_.emplace(node.CreatePublisher<msgs::AuxiliaryViews>("scene/aux", po));
+  }
+}
+
+void FusionOutputs::PublishTracking(const msgs::Header& header, const recon::FrameResult& r,
+                                    const TrackingCounts& counts) {
+  bus::Loan loan = tracking_pub_.Borrow(sizeof(msgs::TrackingStatus));
+  auto t = msgs::WriteMessage<msgs::TrackingStatus>(loan.data());
+  t->header = header;
+  t->state = r.state == recon::TrackingState::kLost        ? msgs::TrackingStatusState::kLost
+             : r.state == recon::TrackingState::kUncertain ? msgs::TrackingStatusState::kUncertain
+                                                           : msgs::TrackingStatusState::kTracked;
+  t->score = r.quality.score;
+  t->reasons = r.quality.reasons;
+  t->integrated = r.integrated ? 1 : 0;
+  t->relocalised = r.relocalised ? 1 : 0;
+  t->rms_m = r.icp.rms_m;
+  t->inlier_fraction = r.icp.inlier_fraction;
+  t->residual_ratio = r.quality.residual_ratio;
+  t->inlier_ratio = r.quality.inlier_ratio;
+  t->motion_translation_m = r.quality.motion_translation_m;
+  t->motion_rotation_deg = r.quality.motion_rotation_deg;
+  t->observability = r.quality.observability;
+  t->frames = counts.frames;
+  t->tracked_frames = counts.tracked;
+  t->uncertain_frames = counts.uncertain;
+  t->lost_frames = counts.lost;
+  t->relocalisations = counts.relocalisations;
+  t->SetReasonText(r.quality.text);
+  tracking_pub_.Publish(std::move(loan));
+}
+
+void FusionOutputs::PublishPose(const msgs::Header& header, const recon::Pose& camera_to_world) {
+  bus::Loan loan = pose_pub_.Borrow(sizeof(msgs::Pose));
+  auto out = msgs::WriteMessage<msgs::Pose>(loan.data());
+  out->header = header;
+  out->SetParentFrameId(world_frame_);
+  out->SetChildFrameId(header.FrameId());
+  out->transform = camera_to_world.ToMsg();
+  pose_pub_.Publish(std::move(loan));
+}
+
+void FusionOutputs::PublishAux(const msgs::Header& header, const recon::Pose& camera_to_world,
+                               const std::vector<recon::AuxiliaryRaycast>& views) {
+  const uint32_t n = aux_pixels_;
+  bus::Loan loan = aux_pub_->Borrow(
+      msgs::AuxiliaryViews::MessageBytesFor(static_cast<uint32_t>(views.size()), n, n));
+  auto aux = msgs::WriteMessage<msgs::AuxiliaryViews>(loan.data());
+  aux->header = header;
+  recon::WriteAuxiliaryViews(camera_to_world, views, *aux, aux.payload);
+  aux_pub_->Publish(std::move(loan));
+}
+
+void FusionOutputs::PublishGeometry(const msgs::Header& header, uint32_t w, uint32_t h,
+                                    const recon::DepthImage& depth, const recon::Vec3Image& normals,
+                                    const msgs::Image* image,
+                                    std::span<const std::byte> image_payload) {
+  if (!gbuffer_pub_ || gbuffer_w_ != w || gbuffer_h_ != h) {
+    bus::PublisherOptions po;
+    po.max_message_bytes = msgs::GeometryBuffer::MessageBytesFor(w, h);
+    gbuffer_pub_.reset();
+    gbuffer_pub_.emplace(node_.CreatePublisher<msgs::GeometryBuffer>("scene/gbuffer", po));
+    gbuffer_w_ = w;
+    gbuffer_h_ = h;
+  }
+  bus::Loan loan = gbuffer_pub_->Borrow(msgs::GeometryBuffer::MessageBytesFor(w, h));
+  auto out = msgs::WriteMessage<msgs::GeometryBuffer>(loan.data());
+  out->header = header;
+  recon::WriteGeometryBuffer(depth, normals, image, image_payload, *out, out.payload);
+  gbuffer_pub_->Publish(std::move(loan));
+}
+
+}  // namespace probeless::fusion
