@@ -59,12 +59,12 @@
 #include "probeless/node/main.h"
 
 #include <chrono>
-#include <deque>
 #include <limits>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "aux_views.h"
 #include "outputs.h"
 #include "probeless/light/messages.h"
 #include "probeless/light/pipeline.h"
@@ -274,47 +274,8 @@ int Run(int argc, char** argv) {
     }
   };
   // Taken in the G_r's handler (matched by stamp), not by Spin.
-  std::optional<bus::Subscriber> aux_sub;
-  if (use_aux) {
-    aux_sub.emplace(node.CreateSubscriber<msgs::AuxiliaryViews>("scene/aux", {.queue_depth = 8}));
-  }
-  std::deque<bus::Sample> aux_queue;  // received views not yet matched, oldest first
-  constexpr size_t kAuxKept = 8;      // held samples (the bus allows 16 per process)
-  int64_t aux_used = 0, aux_missing = 0, aux_bad = 0;
-  auto hold_aux = [&](bus::Sample&& s) {
-    aux_queue.push_back(std::move(s));
-    if (aux_queue.size() > kAuxKept) aux_queue.pop_front();
-  };
-  // The views with `stamp`: drops older ones, waits up to aux_wait_ms while none as new arrived.
-  auto take_aux = [&](int64_t stamp) -> std::optional<bus::Sample> {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(aux_wait_ms);
-    while (true) {
-      // Acknowledged on receipt (they are taken outside Spin): the player's lock-step counts every
-      // input of the node; the G_r that follows them is acknowledged by Spin after its frame.
-      while (auto s = aux_sub->TryTake()) {
-        node.Ack(*aux_sub, s->info());
-        hold_aux(std::move(*s));
-      }
-      while (!aux_queue.empty()) {
-        bus::Sample front = std::move(aux_queue.front());
-        aux_queue.pop_front();
-        // Throws MessageError for a sample shorter than the struct (then dropped).
-        const int64_t front_stamp =
-            msgs::ReadMessage<msgs::AuxiliaryViews>(front.data())->header.stamp_ns;
-        if (front_stamp > stamp) {  // the G_r's views never came
-          aux_queue.push_front(std::move(front));
-          return std::nullopt;
-        }
-        if (front_stamp == stamp) return front;
-      }
-      const auto now = std::chrono::steady_clock::now();
-      if (now >= deadline) return std::nullopt;
-      if (auto s = aux_sub->Take(deadline - now)) {
-        node.Ack(*aux_sub, s->info());
-        hold_aux(std::move(*s));
-      }
-    }
-  };
+  std::optional<scene_light::AuxViewQueue> aux_views;
+  if (use_aux) aux_views.emplace(node, std::chrono::milliseconds(aux_wait_ms));
   scene_light::SceneOutputs outputs(node, publish_transfer);
 
   std::optional<msgs::CameraInfo> info;
@@ -369,33 +330,14 @@ int Run(int argc, char** argv) {
     // Stamps going backwards (a restarted source): what is held for the old stream never matches
     // (the pipeline resets its own state).
     if (header.stamp_ns < last_stamp) {
-      aux_queue.clear();
+      if (aux_views) aux_views->Clear();
       raw_depths.Clear();
     }
     last_stamp = header.stamp_ns;
-    std::optional<bus::Sample> aux_sample;
-    light::AuxiliaryBuffers aux;  // borrows aux_sample's payload
-    if (aux_sub) {
-      try {
-        aux_sample = take_aux(header.stamp_ns);
-        if (aux_sample) {
-          const auto m = msgs::ReadMessage<msgs::AuxiliaryViews>(aux_sample->data());
-          aux = light::AuxiliaryFromMessage(*m, m.payload);
-          ++aux_used;
-        } else {
-          if (aux_missing == 0) {
-            node.Warn() << "no scene/aux for the G_r of stamp " << header.stamp_ns << " within "
-                        << aux_wait_ms << " ms: frames without one run without auxiliary views";
-          }
-          ++aux_missing;
-        }
-      } catch (const msgs::MessageError& e) {
-        node.Error() << e.what() << " (frame " << header.sequence
-                     << " runs without auxiliary views)";
-        aux = {};
-        ++aux_bad;
-      }
-      frame.aux = &aux;
+    scene_light::FrameAuxViews aux;  // held until the frame is done
+    if (aux_views) {
+      aux_views->ForFrame(header, &aux);
+      frame.aux = &aux.buffers;
     }
     if (raw_shadows) {
       // The shadow search's geometry: the depth image with the G_r's stamp (else G_r). Depth
@@ -472,7 +414,10 @@ int Run(int argc, char** argv) {
   if (pose_sub) handlers.push_back({&*pose_sub, hold_pose});
   // Views that arrive while no G_r is being processed (e.g. before camera_info) are taken and
   // acked by Spin too, so lock-step replay never waits on an unacked view.
-  if (aux_sub) handlers.push_back({&*aux_sub, hold_aux});
+  if (aux_views) {
+    handlers.push_back(
+        {&aux_views->subscriber(), [&](bus::Sample&& s) { aux_views->Hold(std::move(s)); }});
+  }
   node.Spin(handlers);
   node.Info() << "published " << published << " lights for " << frames << " frames";
   if (raw_shadows) {
@@ -482,10 +427,7 @@ int Run(int argc, char** argv) {
   if (pose_sub) {
     node.Info() << "focus: used for " << focus_used << " frames, no pose for " << focus_missing;
   }
-  if (use_aux) {
-    node.Info() << "auxiliary views: used for " << aux_used << " frames, missing for "
-                << aux_missing << ", malformed for " << aux_bad;
-  }
+  if (aux_views) aux_views->LogSummary();
   return 0;
 }
 
