@@ -1078,6 +1078,20 @@ TEST(Messages, WorldPointInCamera) {
             "expected a finite non-zero norm");
 }
 
+TEST(Messages, CameraToWorldRotation) {
+  // 90 degrees about world z, quaternion not normalised: camera x -> world y, y -> -x, z -> z.
+  msgs::RigidTransform pose;
+  const double h = std::sqrt(0.5) * 3;
+  pose.rotation = {h, 0, 0, h};
+  const std::array<double, 9> r = light::CameraToWorldRotation(pose);
+  const std::array<double, 9> expected = {0, -1, 0, 1, 0, 0, 0, 0, 1};
+  for (int i = 0; i < 9; ++i) EXPECT_NEAR(r[i], expected[i], 1e-12) << i;
+  pose.rotation = {std::nan(""), 0, 0, 0};
+  EXPECT_EQ(ThrownMessage<light::LightError>([&] { light::CameraToWorldRotation(pose); }),
+            "light::CameraToWorldRotation: the camera's rotation quaternion has norm nan, "
+            "expected a finite non-zero norm");
+}
+
 TEST(Errors, BadInputsGiveOneLineMessages) {
   Scene scene(Shape::kPlane);
   light::TransferComputer computer({});

@@ -28,13 +28,13 @@
 //   analytic_unoccluded (true; false = eq. 6 as printed), publish_transfer (true),
 //   gbuffer_normals ("fusion": G_r's normals; "depth": recomputed from G_r's depth, step
 //   max(2, w / 160)), normal_filter (false: light::FilterNormals on the normals), temporal_frames
-//   (1 = off; light::TemporalLightEstimator over that many frames, camera rotation not
-//   compensated), forgetting (0.5), temporal_reset_ratio (1.3), light_model ("auto" = the point
-//   model when its selection rule prefers it, else §5.2's; "distant" = §5.2; "point" = near-field
-//   point lamps; light::EstimateSceneLight; temporal_frames > 1 or reliability_weights imply
-//   distant and reject an explicit point / auto), lamps (1; 2 = up to two lamps),
-//   publish_indirect (false); depth mode: depth_normals ("auto": "edge" for a clean depth image,
-//   "central" for a noisy one, by light::DepthNoiseQuadratic; "edge":
+//   (1 = off; light::TemporalLightEstimator over that many frames, the history rotated by the
+//   camera's rotation from scene/pose), forgetting (0.5), temporal_reset_ratio (1.3), light_model
+//   ("auto" = the point model when its selection rule prefers it, else §5.2's; "distant" = §5.2;
+//   "point" = near-field point lamps; light::EstimateSceneLight; temporal_frames > 1 or
+//   reliability_weights imply distant and reject an explicit point / auto), lamps (1; 2 = up to two
+//   lamps), publish_indirect (false); depth mode: depth_normals ("auto": "edge" for a clean depth
+//   image, "central" for a noisy one, by light::DepthNoiseQuadratic; "edge":
 //   light::NormalsWithReliability; "central": SmoothDepth w / 80 + NormalsFromDepth), smooth_radius
 //   / normal_step (-1 = from the measured depth noise); reliability_weights (false: the normals'
 //   reliability as the estimator's row weights; gbuffer mode: light::NormalReliability of G_r),
@@ -237,11 +237,12 @@ int Run(int argc, char** argv) {
                            std::to_string(focus.size()) + " values");
   }
   std::optional<bus::Subscriber> pose_sub;
-  if (!focus.empty()) {
+  const bool temporal = po.temporal.frames > 1;  // its history is rotated by the poses
+  if (!focus.empty() || temporal) {
     pose_sub.emplace(node.CreateSubscriber<msgs::Pose>("scene/pose", {.queue_depth = 8}));
   }
   node::StampCache<msgs::Pose> poses(8);  // the latest camera poses
-  int64_t focus_used = 0, focus_missing = 0;
+  int64_t focus_used = 0, rotated = 0, pose_missing = 0;
   auto hold_pose = [&](bus::Sample&& s) {
     const msgs::Pose pose = *msgs::ReadMessage<msgs::Pose>(s.data());
     poses.Add(pose.header.stamp_ns, pose);
@@ -372,14 +373,23 @@ int Run(int argc, char** argv) {
       // The pose of this frame (fusion publishes it before its G_r), else the newest older one.
       take_queued(*pose_sub, hold_pose);
       if (const msgs::Pose* pose = poses.LatestAtOrBefore(header.stamp_ns)) {
-        frame.focus = light::WorldPointInCamera(pose->transform, {focus[0], focus[1], focus[2]});
-        ++focus_used;
-      } else {
-        if (focus_missing == 0) {
-          node.Warn() << "no scene/pose up to stamp " << header.stamp_ns
-                      << ": frames without one are fitted without the focus";
+        if (!focus.empty()) {
+          frame.focus = light::WorldPointInCamera(pose->transform, {focus[0], focus[1], focus[2]});
+          ++focus_used;
         }
-        ++focus_missing;
+        if (temporal) {
+          frame.camera_to_world_rotation = light::CameraToWorldRotation(pose->transform);
+          ++rotated;
+        }
+      } else {
+        if (pose_missing == 0) {
+          node.Warn() << "no scene/pose up to stamp " << header.stamp_ns
+                      << ": frames without one are"
+                      << (focus.empty() ? "" : " fitted without the focus")
+                      << (!focus.empty() && temporal ? " and" : "")
+                      << (temporal ? " taken as not rotated by the temporal fit" : "");
+        }
+        ++pose_missing;
       }
     }
     const light::ScenePipelineResult& r = pipeline.Process(frame);
@@ -425,7 +435,13 @@ int Run(int argc, char** argv) {
                 << " frames, on G_r for " << raw_missing;
   }
   if (pose_sub) {
-    node.Info() << "focus: used for " << focus_used << " frames, no pose for " << focus_missing;
+    if (!focus.empty()) {
+      node.Info() << "focus: used for " << focus_used << " frames, no pose for " << pose_missing;
+    }
+    if (temporal) {
+      node.Info() << "temporal fit: rotated by scene/pose for " << rotated
+                  << " frames, no pose for " << pose_missing;
+    }
   }
   if (aux_views) aux_views->LogSummary();
   return 0;

@@ -7,7 +7,8 @@
 // launch/scene_light.yaml with aux:=true on the same scenario: player (lock-step) -> fusion
 // (publish_aux) -> scene_light (use_aux): every frame gets 3 auxiliary views of 128 x 128 with its
 // G_r's stamp and scene_light uses them; auxiliary views of the wrong type on /scene/aux stop
-// scene_light with one line, a malformed one is one error line and the frame runs without views.
+// scene_light with one line, a malformed one is one error line and the frame runs without views;
+// with temporal_frames the temporal fit gets every frame's camera rotation from fusion's pose.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -283,6 +284,19 @@ TEST(SceneLightLaunch, FusionAuxiliaryViewsReachSceneLight) {
   EXPECT_NE(log.find("shadow search on the frame's depth image for 3 frames, on G_r for 0"),
             std::string::npos)
       << log;
+}
+
+TEST(SceneLightLaunch, TemporalFitIsRotatedByFusionsPoses) {
+  std::map<int64_t, AuxInfo> aux;
+  std::set<int64_t> light_stamps;
+  std::string log;
+  RunAuxLaunch("light_model:=distant temporal_frames:=3", &aux, &light_stamps, &log);
+  EXPECT_EQ(light_stamps.size(), 3u) << log;
+  // Fusion publishes each frame's pose before its G_r: every frame finds its own.
+  EXPECT_NE(log.find("temporal fit: rotated by scene/pose for 3 frames, no pose for 0"),
+            std::string::npos)
+      << log;
+  EXPECT_EQ(log.find("focus: used for"), std::string::npos) << log;  // no focus given
 }
 
 TEST(SceneLightLaunch, FusionAddsTheLightViewFromSceneLight) {

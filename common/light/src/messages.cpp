@@ -158,6 +158,19 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
   }
 }
 
+std::array<double, 9> CameraToWorldRotation(const msgs::RigidTransform& camera_to_world) {
+  const msgs::Quaternion& q = camera_to_world.rotation;
+  const double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+  if (!(n > 0) || !std::isfinite(n)) {
+    throw LightError("light::CameraToWorldRotation: the camera's rotation quaternion has norm " +
+                     std::to_string(n) + ", expected a finite non-zero norm");
+  }
+  const double w = q.w / n, x = q.x / n, y = q.y / n, z = q.z / n;
+  return {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
+          2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+          2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+}
+
 std::array<float, 3> WorldPointInCamera(const msgs::RigidTransform& camera_to_world,
                                         const std::array<double, 3>& world) {
   const msgs::Quaternion& q = camera_to_world.rotation;
@@ -166,11 +179,7 @@ std::array<float, 3> WorldPointInCamera(const msgs::RigidTransform& camera_to_wo
     throw LightError("light::WorldPointInCamera: the camera's rotation quaternion has norm " +
                      std::to_string(n) + ", expected a finite non-zero norm");
   }
-  const double w = q.w / n, x = q.x / n, y = q.y / n, z = q.z / n;
-  // Row-major R (camera -> world) of the unit quaternion.
-  const double r[9] = {1 - 2 * (y * y + z * z), 2 * (x * y - w * z),     2 * (x * z + w * y),
-                       2 * (x * y + w * z),     1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-                       2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
+  const std::array<double, 9> r = CameraToWorldRotation(camera_to_world);
   const msgs::Vector3& t = camera_to_world.translation;
   const double d[3] = {world[0] - t.x, world[1] - t.y, world[2] - t.z};
   std::array<float, 3> out{};

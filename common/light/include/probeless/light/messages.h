@@ -67,6 +67,11 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
 // confidence; units msgs::ShLightUnits::kLinear (the estimate is in the image's linear units).
 void FillShLight(const LightEstimate& e, msgs::ShLight* out, float scale = 1.0f);
 
+// The rotation of `camera_to_world` (child -> parent, msgs::Pose::transform) as a row-major 3 x 3
+// matrix R (d_parent = R d_camera) of the normalised quaternion: SceneFrame's
+// camera_to_world_rotation. Throws LightError for a quaternion of norm 0 or not finite.
+std::array<double, 9> CameraToWorldRotation(const msgs::RigidTransform& camera_to_world);
+
 // The point `world` (metres, in camera_to_world's parent frame) in the camera frame of
 // `camera_to_world` (child -> parent, msgs::Pose::transform): R^T (world - t), R of the
 // normalised quaternion. Throws LightError for a quaternion of norm 0 or not finite.
