@@ -42,18 +42,17 @@
 //
 // Exit: 0 on shutdown or after max_frames, 2 on bad params or content, 1 when the window back-end's
 // X display goes away (one line on stderr).
-#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <exception>
 #include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "outputs.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 #include "probeless/prt/demo_objects.h"
@@ -63,34 +62,10 @@
 #include "probeless/render/output.h"
 #include "probeless/render/renderer.h"
 #include "probeless/render/viewer.h"
-#include "probeless/sh/sh.h"
 
 namespace {
 
 using namespace probeless;
-
-// The dominant light of eq. 10 from a light message: its own direction and intensity, else
-// Sloan's optimal linear direction of the mean colour and sh::DirectionalPower along it.
-light::DominantLight DominantOf(const msgs::ShLight& m) {
-  light::DominantLight d;
-  const float* md = m.dominant_direction;
-  if (m.intensity > 0 && md[0] * md[0] + md[1] * md[1] + md[2] * md[2] > 0.5f) {
-    d.direction = {md[0], md[1], md[2]};
-    d.intensity = m.intensity;
-    return d;
-  }
-  if (m.bands < 2) return d;
-  std::vector<double> grey(m.bands * m.bands);
-  for (size_t k = 0; k < grey.size(); ++k) {
-    grey[k] = (m.coefficients[k][0] + m.coefficients[k][1] + m.coefficients[k][2]) / 3.0;
-  }
-  const sh::Vec3 dir = sh::OptimalLinearDirection(grey.data());
-  if (dir[0] == 0 && dir[1] == 0 && dir[2] == 0) return d;
-  d.direction = {static_cast<float>(dir[0]), static_cast<float>(dir[1]),
-                 static_cast<float>(dir[2])};
-  d.intensity = static_cast<float>(std::max(0.0, sh::DirectionalPower(grey, dir)));
-  return d;
-}
 
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "renderer");
@@ -210,8 +185,7 @@ int Run(int argc, char** argv) {
   bus::Subscriber transfer_sub = node.CreateSubscriber<msgs::TransferBuffer>("scene/transfer");
   bus::Subscriber transfer_virtual_sub =
       node.CreateSubscriber<msgs::TransferBuffer>("scene/transfer_virtual");
-  std::optional<bus::Publisher> publisher;
-  uint32_t publisher_w = 0, publisher_h = 0;
+  renderer_node::CompositePublisher composite_pub(node);
 
   // Latest state.
   std::vector<uint8_t> camera_rgb;
@@ -355,7 +329,7 @@ int Run(int argc, char** argv) {
       df.real = g;
       df.with_virtual = &with_virtual;
       df.light = light;
-      df.dominant = DominantOf(light_msg);
+      df.dominant = renderer_node::DominantOf(light_msg);
       df.camera_tone = renderer.tone_mapping();
       df.camera_rgb = camera_rgb;
       df.objects = raster;
@@ -390,27 +364,7 @@ int Run(int argc, char** argv) {
       in.transfer_count = transfer_count;
     }
     renderer.Render(in, composite);
-    if (!publisher || publisher_w != static_cast<uint32_t>(width) ||
-        publisher_h != static_cast<uint32_t>(height)) {
-      bus::PublisherOptions options;
-      options.max_message_bytes =
-          msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8);
-      options.slot_count = 8;
-      // The publisher appears with the first frame (its size is the camera's): keep the last two
-      // composites for subscribers that discover the topic a moment later (the recorder polls).
-      options.history = 2;
-      publisher.reset();
-      publisher.emplace(node.CreatePublisher<msgs::Image>("render/composite", options));
-      publisher_w = width;
-      publisher_h = height;
-    }
-    bus::Loan loan =
-        publisher->Borrow(msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8));
-    auto view = msgs::WriteMessage<msgs::Image>(loan.data());
-    view->header = camera_header;
-    view->Init(width, height, msgs::Encoding::kRgb8);
-    std::memcpy(view.payload.data(), composite.rgb.data(), composite.rgb.size());
-    publisher->Publish(std::move(loan));
+    composite_pub.Publish(camera_header, width, height, composite);
     if (writer) writer->Write(composite);
     if (backend == render::Backend::kWindow) {
       render::ViewerInputs vin;

@@ -1,0 +1,35 @@
+// The renderer's output topic and its light-message helper.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+
+#include "probeless/bus/bus.h"
+#include "probeless/light/transfer.h"
+#include "probeless/msgs/msgs.h"
+#include "probeless/node/node.h"
+#include "probeless/render/renderer.h"
+
+namespace probeless::renderer_node {
+
+// The dominant light of eq. 10 from a light message: its own direction and intensity, else
+// Sloan's optimal linear direction of the mean colour and sh::DirectionalPower along it.
+light::DominantLight DominantOf(const msgs::ShLight& m);
+
+// render/composite (Image rgb8): created with the first frame (its size is the camera's),
+// re-created when the size changes; 8 slots, a history of the last two composites for
+// subscribers that discover the topic a moment later (the recorder polls).
+class CompositePublisher {
+ public:
+  explicit CompositePublisher(node::Node& node) : node_(node) {}
+  // Publishes the width x height `composite` under `header` (the camera image's).
+  void Publish(const msgs::Header& header, int width, int height,
+               const render::Composite& composite);
+
+ private:
+  node::Node& node_;
+  std::optional<bus::Publisher> publisher_;
+  uint32_t width_ = 0, height_ = 0;
+};
+
+}  // namespace probeless::renderer_node
