@@ -11,8 +11,12 @@
 //   nothing of the old stream matches the new one. Held stamps therefore never decrease, oldest
 //   to newest. An equal stamp (a duplicate) is kept after the ones already held.
 // - A full cache evicts its oldest value when one is added.
-// - Lookups return a pointer into the cache (nullptr: no match), valid until the next non-const
-//   call.
+// - Lookups return a pointer into the cache (nullptr: no match), valid until the next Add,
+//   DropUpTo or Clear.
+//
+//   node::StampCache<msgs::Pose> poses(8);                    // scene_light's camera poses
+//   poses.Add(pose.header.stamp_ns, pose);                    // on each scene/pose
+//   if (const msgs::Pose* p = poses.LatestAtOrBefore(stamp))  // on each frame
 //
 // Thread safety: none; one thread at a time (normally the node's Spin thread).
 #pragma once
@@ -70,6 +74,7 @@ class StampCache {
     }
     return nullptr;
   }
+  // The same, for changing the held value in place.
   T* Exact(int64_t stamp_ns) { return const_cast<T*>(std::as_const(*this).Exact(stamp_ns)); }
 
   // The newest value with a stamp at or before `stamp_ns` and at most `tolerance_ns` older than
@@ -98,8 +103,10 @@ class StampCache {
   // Removes every value (not counted by resets()).
   void Clear() { entries_.clear(); }
 
+  // Values held (duplicates included), at most capacity().
   size_t size() const { return entries_.size(); }
   bool empty() const { return entries_.empty(); }
+  // The bound given to the constructor.
   size_t capacity() const { return capacity_; }
   // The newest value's stamp, or nullopt when empty.
   std::optional<int64_t> newest_stamp() const {
