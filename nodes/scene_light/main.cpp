@@ -242,7 +242,7 @@ int Run(int argc, char** argv) {
     pose_sub.emplace(node.CreateSubscriber<msgs::Pose>("scene/pose", {.queue_depth = 8}));
   }
   node::StampCache<msgs::Pose> poses(8);  // the latest camera poses
-  int64_t focus_used = 0, rotated = 0, pose_missing = 0;
+  int64_t focus_used = 0, focus_missing = 0, rotated = 0, rotation_missing = 0;
   auto hold_pose = [&](bus::Sample&& s) {
     const msgs::Pose pose = *msgs::ReadMessage<msgs::Pose>(s.data());
     poses.Add(pose.header.stamp_ns, pose);
@@ -370,26 +370,35 @@ int Run(int argc, char** argv) {
       raw_depths.DropUpTo(header.stamp_ns);
     }
     if (pose_sub) {
-      // The pose of this frame (fusion publishes it before its G_r), else the newest older one.
       take_queued(*pose_sub, hold_pose);
-      if (const msgs::Pose* pose = poses.LatestAtOrBefore(header.stamp_ns)) {
-        if (!focus.empty()) {
+      // The focus: the pose of this frame (fusion publishes it before its G_r), else the newest
+      // older one (the objects stay put while tracking is lost).
+      if (!focus.empty()) {
+        if (const msgs::Pose* pose = poses.LatestAtOrBefore(header.stamp_ns)) {
           frame.focus = light::WorldPointInCamera(pose->transform, {focus[0], focus[1], focus[2]});
           ++focus_used;
+        } else {
+          if (focus_missing == 0) {
+            node.Warn() << "no scene/pose up to stamp " << header.stamp_ns
+                        << ": frames without one are fitted without the focus";
+          }
+          ++focus_missing;
         }
-        if (temporal) {
+      }
+      // The temporal fit: only this frame's own pose (fusion publishes none for a lost frame; an
+      // older one would pass for a camera at rest).
+      if (temporal) {
+        if (const msgs::Pose* pose = poses.Exact(header.stamp_ns)) {
           frame.camera_to_world_rotation = light::CameraToWorldRotation(pose->transform);
           ++rotated;
+        } else {
+          if (rotation_missing == 0) {
+            node.Warn() << "no scene/pose with stamp " << header.stamp_ns
+                        << ": frames without their own pose are taken as not rotated by the "
+                           "temporal fit";
+          }
+          ++rotation_missing;
         }
-      } else {
-        if (pose_missing == 0) {
-          node.Warn() << "no scene/pose up to stamp " << header.stamp_ns
-                      << ": frames without one are"
-                      << (focus.empty() ? "" : " fitted without the focus")
-                      << (!focus.empty() && temporal ? " and" : "")
-                      << (temporal ? " taken as not rotated by the temporal fit" : "");
-        }
-        ++pose_missing;
       }
     }
     const light::ScenePipelineResult& r = pipeline.Process(frame);
@@ -436,11 +445,11 @@ int Run(int argc, char** argv) {
   }
   if (pose_sub) {
     if (!focus.empty()) {
-      node.Info() << "focus: used for " << focus_used << " frames, no pose for " << pose_missing;
+      node.Info() << "focus: used for " << focus_used << " frames, no pose for " << focus_missing;
     }
     if (temporal) {
       node.Info() << "temporal fit: rotated by scene/pose for " << rotated
-                  << " frames, no pose for " << pose_missing;
+                  << " frames, no pose of their own for " << rotation_missing;
     }
   }
   if (aux_views) aux_views->LogSummary();

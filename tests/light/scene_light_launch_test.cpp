@@ -293,8 +293,9 @@ TEST(SceneLightLaunch, TemporalFitIsRotatedByFusionsPoses) {
   RunAuxLaunch("light_model:=distant temporal_frames:=3", &aux, &light_stamps, &log);
   EXPECT_EQ(light_stamps.size(), 3u) << log;
   // Fusion publishes each frame's pose before its G_r: every frame finds its own.
-  EXPECT_NE(log.find("temporal fit: rotated by scene/pose for 3 frames, no pose for 0"),
-            std::string::npos)
+  EXPECT_NE(
+      log.find("temporal fit: rotated by scene/pose for 3 frames, no pose of their own for 0"),
+      std::string::npos)
       << log;
   EXPECT_EQ(log.find("focus: used for"), std::string::npos) << log;  // no focus given
 }

@@ -56,7 +56,7 @@ int Run(int argc, char** argv) {
   min_interval = node.Param("min_interval", min_interval);
   std::vector<const char*> args = {argv[0]};
   for (const std::string& arg : node.args()) args.push_back(arg.c_str());
-  flags.Parse(static_cast<int>(args.size()), args.data());
+  if (!flags.Parse(static_cast<int>(args.size()), args.data())) return 0;  // --help printed
   // Whole-text parse: sscanf took "9x6abc" and "9x6x2" as 9x6.
   const size_t x = size_text.find('x');
   const std::string_view size_view(size_text);

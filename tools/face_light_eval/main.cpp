@@ -340,7 +340,12 @@ int Run(int argc, char** argv) {
   // An integer option given as any number, truncated (as it always was).
   auto truncated = [](int* target, const std::string& flag) {
     return [target, flag](const std::string& text) {
-      *target = static_cast<int>(probeless::parse::ParseDouble(flag, text));
+      const double v = probeless::parse::ParseDouble(flag, text);
+      if (!(v > -2147483649.0 && v < 2147483648.0)) {  // static_cast beyond int is undefined
+        throw probeless::node::UsageError(flag + " expects a number in the int range, got '" +
+                                          text + "'");
+      }
+      *target = static_cast<int>(v);
     };
   };
   probeless::node::FlagParser flags("face_light_eval", kDescription);

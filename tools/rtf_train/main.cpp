@@ -35,11 +35,14 @@ constexpr const char* kDescription =
     "writes a face_light model file (docs/face_light.md); --yaleb (or --synthetic) and --out are\n"
     "required.";
 
+bool progress_open = false;  // a progress bar is drawn and its line not yet ended
+
 void Progress(const std::string& label, double fraction) {
   constexpr int kWidth = 40;
   const int filled = static_cast<int>(fraction * kWidth + 0.5);
   std::fprintf(stderr, "\r%-28s [%s%s] %3d%%", label.c_str(), std::string(filled, '#').c_str(),
                std::string(kWidth - filled, '.').c_str(), static_cast<int>(fraction * 100 + 0.5));
+  progress_open = fraction < 1;
   if (fraction >= 1) std::fputc('\n', stderr);
   std::fflush(stderr);
 }
@@ -55,7 +58,12 @@ int Run(int argc, char** argv) {
   // An integer option given as any number, truncated (as it always was).
   auto truncated = [](int* target, const std::string& flag) {
     return [target, flag](const std::string& text) {
-      *target = static_cast<int>(probeless::parse::ParseDouble(flag, text));
+      const double v = probeless::parse::ParseDouble(flag, text);
+      if (!(v > -2147483649.0 && v < 2147483648.0)) {  // static_cast beyond int is undefined
+        throw probeless::node::UsageError(flag + " expects a number in the int range, got '" +
+                                          text + "'");
+      }
+      *target = static_cast<int>(v);
     };
   };
   probeless::node::FlagParser flags("rtf_train", kDescription);
@@ -171,5 +179,12 @@ int Run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return probeless::node::RunMain("rtf_train", [&] { return Run(argc, argv); });
+  return probeless::node::RunMain("rtf_train", [&] {
+    try {
+      return Run(argc, argv);
+    } catch (...) {
+      if (progress_open) std::fputc('\n', stderr);  // the bar is drawn with \r: end its line
+      throw;
+    }
+  });
 }

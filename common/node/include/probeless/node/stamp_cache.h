@@ -140,6 +140,7 @@ class HeldMessage {
         offset_(std::exchange(other.offset_, 0)),
         size_(std::exchange(other.size_, 0)) {}
   HeldMessage& operator=(HeldMessage&& other) noexcept {
+    if (this == &other) return *this;
     storage_ = std::move(other.storage_);
     offset_ = std::exchange(other.offset_, 0);
     size_ = std::exchange(other.size_, 0);
