@@ -337,17 +337,6 @@ int Run(int argc, char** argv) {
   std::string train_yaleb;  // where the training subjects' images are (--head-pose tracker)
   fl::EstimatorOptions options;
   bool synthetic = false;
-  // An integer option given as any number, truncated (as it always was).
-  auto truncated = [](int* target, const std::string& flag) {
-    return [target, flag](const std::string& text) {
-      const double v = probeless::parse::ParseDouble(flag, text);
-      if (!(v > -2147483649.0 && v < 2147483648.0)) {  // static_cast beyond int is undefined
-        throw probeless::node::UsageError(flag + " expects a number in the int range, got '" +
-                                          text + "'");
-      }
-      *target = static_cast<int>(v);
-    };
-  };
   probeless::node::FlagParser flags("face_light_eval", kDescription);
   flags.Add("--model", &model_path, "MODEL", "the face light model (rtf_train --out)");
   flags.AddCallback("--yaleb", "DIR", "the Extended Yale B folder", [&](const std::string& v) {
@@ -387,12 +376,10 @@ int Run(int argc, char** argv) {
   flags.AddSwitch(
       "--linear-direction", [&] { options.directional_fit = false; },
       "estimator: Sloan's optimal linear direction (the paper)");
-  flags.AddCallback("--directional-grid", "N", "estimator: start directions",
-                    truncated(&options.directional_grid, "--directional-grid"),
-                    std::to_string(options.directional_grid));
-  flags.AddCallback("--directional-iterations", "N", "estimator: Newton iterations",
-                    truncated(&options.directional_iterations, "--directional-iterations"),
-                    std::to_string(options.directional_iterations));
+  flags.AddTruncatedInt("--directional-grid", &options.directional_grid, "N",
+                        "estimator: start directions");
+  flags.AddTruncatedInt("--directional-iterations", &options.directional_iterations, "N",
+                        "estimator: Newton iterations");
   flags.AddSwitch(
       "--no-ambient", [&] { options.directional_ambient = false; },
       "estimator: no ambient term in the directional fit");

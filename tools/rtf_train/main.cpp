@@ -55,17 +55,6 @@ int Run(int argc, char** argv) {
   options.direction_bands = 5;  // direction RTFs, bands 0..4 (docs/face_light.md)
   double grid_step = 6.42;
   std::string align = "none";
-  // An integer option given as any number, truncated (as it always was).
-  auto truncated = [](int* target, const std::string& flag) {
-    return [target, flag](const std::string& text) {
-      const double v = probeless::parse::ParseDouble(flag, text);
-      if (!(v > -2147483649.0 && v < 2147483648.0)) {  // static_cast beyond int is undefined
-        throw probeless::node::UsageError(flag + " expects a number in the int range, got '" +
-                                          text + "'");
-      }
-      *target = static_cast<int>(v);
-    };
-  };
   probeless::node::FlagParser flags("rtf_train", kDescription);
   flags.Add("--yaleb", &yaleb, "DIR", "Extended Yale B cropped folder (yaleBxx/ sub-folders)");
   flags.Add("--synthetic", &yaleb, "DIR",
@@ -73,22 +62,20 @@ int Run(int argc, char** argv) {
             "used, .ppm colour images are ignored)");
   flags.Add("--subjects", &subjects_text, "LIST",
             "training subjects, e.g. 1-28 or 1,3,5-7 (default: all in DIR)");
-  flags.AddCallback("--points", "N", "keep exactly N samples (0: use --percentile)",
-                    truncated(&options.points, "--points"), std::to_string(options.points));
+  flags.AddTruncatedInt("--points", &options.points, "N",
+                        "keep exactly N samples (0: use --percentile)");
   flags.Add("--percentile", &options.percentile, "P",
             "keep candidates above the P-th percentile of |RTF coefficient| for at least one "
             "coefficient (0 = every candidate; the paper's 90 keeps ~300 of 512)");
-  flags.AddCallback("--patch-radius", "R", "box patch half size in crop pixels (2: 5x5)",
-                    truncated(&options.patch_radius_px, "--patch-radius"),
-                    std::to_string(options.patch_radius_px));
+  flags.AddTruncatedInt("--patch-radius", &options.patch_radius_px, "R",
+                        "box patch half size in crop pixels (2: 5x5)");
   flags.Add("--intensity-exponent", &options.intensity_exponent, "G",
             "response exponent of the RTF fit (1 = the paper)");
   flags.Add("--grid-step", &grid_step, "PX",
             "candidate grid step in crop pixels (6.42: 512 candidates)");
-  flags.AddCallback("--direction-bands", "B",
-                    "also fit B-band direction RTFs for the directional fit (0 = none, 4 or 5)",
-                    truncated(&options.direction_bands, "--direction-bands"),
-                    std::to_string(options.direction_bands));
+  flags.AddTruncatedInt(
+      "--direction-bands", &options.direction_bands, "B",
+      "also fit B-band direction RTFs for the directional fit (0 = none, 4 or 5)");
   flags.Add("--direction-ridge", &options.direction_ridge, "X",
             "Tikhonov weight of the direction RTF fit");
   flags.Add("--align", &align, "none|tracker",

@@ -118,6 +118,19 @@ void FlagParser::AddCallback(std::string name, std::string metavar, std::string 
            std::move(on_value));
 }
 
+void FlagParser::AddTruncatedInt(std::string name, int* value, std::string metavar,
+                                 std::string help) {
+  const std::string flag = name;
+  AddValue(std::move(name), std::move(metavar), std::move(help), std::to_string(*value),
+           [value, flag](const std::string& text) {
+             const double v = parse::ParseDouble(flag, text);
+             if (!(v > -2147483649.0 && v < 2147483648.0)) {  // static_cast beyond int is undefined
+               throw UsageError(flag + " expects a number in the int range, got '" + text + "'");
+             }
+             *value = static_cast<int>(v);
+           });
+}
+
 void FlagParser::AddPositional(std::string metavar, std::string* value, std::string help) {
   if (!positionals_.empty() && positionals_.back().values) {
     throw std::logic_error("FlagParser: positional " + metavar + " declared after " +

@@ -190,6 +190,22 @@ TEST(FlagParser, NumberErrorsAreUsageErrors) {
             2);
 }
 
+TEST(FlagParser, TruncatedIntTakesAnyNumberWithinTheIntRange) {
+  int points = 7;
+  FlagParser flags("tool", "");
+  flags.AddTruncatedInt("--points", &points, "N", "samples");
+  const char* ok[] = {"tool", "--points", "8.9"};
+  ASSERT_TRUE(flags.Parse(3, ok));
+  EXPECT_EQ(points, 8);
+  const char* negative[] = {"tool", "--points=-3.5"};
+  ASSERT_TRUE(flags.Parse(2, negative));
+  EXPECT_EQ(points, -3);
+  const char* huge[] = {"tool", "--points", "1e10"};
+  PROBELESS_EXPECT_THROWS_MESSAGE(flags.Parse(3, huge), UsageError,
+                                  "--points expects a number in the int range, got '1e10'");
+  EXPECT_EQ(points, -3);
+}
+
 TEST(FlagParser, OtherExceptionsOfACallbackPropagate) {
   FlagParser flags("tool", "");
   flags.AddCallback("--backend", "NAME", "detector",

@@ -114,6 +114,11 @@ class FlagParser {
   void AddCallback(std::string name, std::string metavar, std::string help,
                    std::function<void(const std::string&)> on_value, std::string default_text = "");
 
+  // An integer flag that takes any number and truncates it towards zero ("--points 8.0" -> 8), as
+  // the face-light tools always did; a value outside the int range throws UsageError
+  // "--points expects a number in the int range, got '1e10'". The default shown is *value.
+  void AddTruncatedInt(std::string name, int* value, std::string metavar, std::string help);
+
   // A positional argument: the first argument not starting with '-' goes into the first declared
   // positional, the next into the second, and so on. Positionals are optional here (a tool checks
   // what it requires after Parse).
