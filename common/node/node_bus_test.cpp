@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 
 namespace probeless::node {
@@ -114,6 +115,40 @@ TEST_F(NodeBusTest, PublisherAndSubscriberTalkWithTypeAndNodeNames) {
     EXPECT_EQ(pixels.size(), 64u * 48 * 3);
     EXPECT_EQ(pixels.back(), seq);
   }
+}
+
+// Publishes one w x h rgb8 image with every byte `value` through `pub`.
+void PublishImage(GrowingPublisher<msgs::Image>& pub, uint32_t w, uint32_t h, uint8_t value) {
+  bus::Loan loan = pub.Borrow(msgs::Image::MessageBytesFor(w, h, msgs::Encoding::kRgb8));
+  msgs::WriteView<msgs::Image> out = msgs::WriteMessage<msgs::Image>(loan.data());
+  out->Init(w, h, msgs::Encoding::kRgb8);
+  std::span<uint8_t> pixels = msgs::ImageChannels<uint8_t>(*out, out.payload);
+  std::memset(pixels.data(), value, pixels.size());
+  pub.Publish(std::move(loan));
+}
+
+TEST_F(NodeBusTest, GrowingPublisherIsMadeByTheFirstMessageAndGrowsForALargerOne) {
+  Node talker(Argv({"--ros-args", "-r", "image:=camera/image"}), "talker");
+  Node listener(Argv({}), "listener");
+  GrowingPublisher<msgs::Image> pub(talker, "image", {.slot_count = 4});
+  EXPECT_FALSE(pub.created());
+  EXPECT_EQ(FindTopic(bus::ListTopics(), "/camera/image"), nullptr);  // nothing before a message
+  bus::Subscriber sub = listener.CreateSubscriber<msgs::Image>("camera/image", Depth(8));
+  PublishImage(pub, 32, 24, 1);
+  EXPECT_TRUE(pub.created());
+  PublishImage(pub, 16, 12, 2);  // smaller: the same publisher
+  PublishImage(pub, 64, 48, 3);  // larger: re-created with room for it
+  PublishImage(pub, 64, 48, 4);
+  std::vector<std::pair<uint32_t, uint8_t>> seen;  // width, first byte
+  while (std::optional<bus::Sample> s = sub.Take(200ms)) {
+    msgs::ReadView<msgs::Image> in = msgs::ReadMessage<msgs::Image>(s->data());
+    seen.emplace_back(in->width, msgs::ImageChannels<uint8_t>(*in, in.payload)[0]);
+  }
+  const std::vector<std::pair<uint32_t, uint8_t>> expected = {{32, 1}, {16, 2}, {64, 3}, {64, 4}};
+  EXPECT_EQ(seen, expected);
+  const bus::TopicSnapshot* topic = FindTopic(bus::ListTopics(), "/camera/image");
+  ASSERT_NE(topic, nullptr);
+  ASSERT_EQ(topic->publishers.size(), 1u);  // the old one is gone
 }
 
 TEST_F(NodeBusTest, FixedSizeTypesNeedNoCapacityAndPayloadTypesDo) {

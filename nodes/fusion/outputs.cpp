@@ -8,7 +8,8 @@ FusionOutputs::FusionOutputs(node::Node& node, std::string world_frame, int aux_
     : node_(node),
       world_frame_(std::move(world_frame)),
       tracking_pub_(node.CreatePublisher<msgs::TrackingStatus>("scene/tracking")),
-      pose_pub_(node.CreatePublisher<msgs::Pose>("scene/pose")) {
+      pose_pub_(node.CreatePublisher<msgs::Pose>("scene/pose")),
+      gbuffer_pub_(node, "scene/gbuffer") {
   if (aux_pixels > 0) {
     aux_pixels_ = static_cast<uint32_t>(aux_pixels);
     bus::PublisherOptions po;
@@ -70,19 +71,11 @@ void FusionOutputs::PublishGeometry(const msgs::Header& header, uint32_t w, uint
                                     const recon::DepthImage& depth, const recon::Vec3Image& normals,
                                     const msgs::Image* image,
                                     std::span<const std::byte> image_payload) {
-  if (!gbuffer_pub_ || gbuffer_w_ != w || gbuffer_h_ != h) {
-    bus::PublisherOptions po;
-    po.max_message_bytes = msgs::GeometryBuffer::MessageBytesFor(w, h);
-    gbuffer_pub_.reset();
-    gbuffer_pub_.emplace(node_.CreatePublisher<msgs::GeometryBuffer>("scene/gbuffer", po));
-    gbuffer_w_ = w;
-    gbuffer_h_ = h;
-  }
-  bus::Loan loan = gbuffer_pub_->Borrow(msgs::GeometryBuffer::MessageBytesFor(w, h));
+  bus::Loan loan = gbuffer_pub_.Borrow(msgs::GeometryBuffer::MessageBytesFor(w, h));
   auto out = msgs::WriteMessage<msgs::GeometryBuffer>(loan.data());
   out->header = header;
   recon::WriteGeometryBuffer(depth, normals, image, image_payload, *out, out.payload);
-  gbuffer_pub_->Publish(std::move(loan));
+  gbuffer_pub_.Publish(std::move(loan));
 }
 
 }  // namespace probeless::fusion

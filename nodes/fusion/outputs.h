@@ -10,6 +10,7 @@
 
 #include "probeless/bus/bus.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 #include "probeless/recon/msgs_io.h"
 #include "probeless/recon/pipeline.h"
@@ -47,8 +48,9 @@ class FusionOutputs {
   node::Node& node_;
   std::string world_frame_;
   bus::Publisher tracking_pub_, pose_pub_;
-  std::optional<bus::Publisher> aux_pub_, gbuffer_pub_;
-  uint32_t aux_pixels_ = 0, gbuffer_w_ = 0, gbuffer_h_ = 0;
+  std::optional<bus::Publisher> aux_pub_;
+  node::GrowingPublisher<msgs::GeometryBuffer> gbuffer_pub_;
+  uint32_t aux_pixels_ = 0;
 };
 
 }  // namespace probeless::fusion

@@ -31,26 +31,13 @@ light::DominantLight DominantOf(const msgs::ShLight& m) {
 
 void CompositePublisher::Publish(const msgs::Header& header, int width, int height,
                                  const render::Composite& composite) {
-  if (!publisher_ || width_ != static_cast<uint32_t>(width) ||
-      height_ != static_cast<uint32_t>(height)) {
-    bus::PublisherOptions options;
-    options.max_message_bytes = msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8);
-    options.slot_count = 8;
-    // The publisher appears with the first frame (its size is the camera's): keep the last two
-    // composites for subscribers that discover the topic a moment later (the recorder polls).
-    options.history = 2;
-    publisher_.reset();
-    publisher_.emplace(node_.CreatePublisher<msgs::Image>("render/composite", options));
-    width_ = width;
-    height_ = height;
-  }
   bus::Loan loan =
-      publisher_->Borrow(msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8));
+      publisher_.Borrow(msgs::Image::MessageBytesFor(width, height, msgs::Encoding::kRgb8));
   auto view = msgs::WriteMessage<msgs::Image>(loan.data());
   view->header = header;
   view->Init(width, height, msgs::Encoding::kRgb8);
   std::memcpy(view.payload.data(), composite.rgb.data(), composite.rgb.size());
-  publisher_->Publish(std::move(loan));
+  publisher_.Publish(std::move(loan));
 }
 
 }  // namespace probeless::renderer_node

@@ -7,6 +7,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 #include "probeless/render/renderer.h"
 
@@ -17,19 +18,19 @@ namespace probeless::renderer_node {
 light::DominantLight DominantOf(const msgs::ShLight& m);
 
 // render/composite (Image rgb8): created with the first frame (its size is the camera's),
-// re-created when the size changes; 8 slots, a history of the last two composites for
+// re-created when a frame is larger; 8 slots, a history of the last two composites for
 // subscribers that discover the topic a moment later (the recorder polls).
 class CompositePublisher {
  public:
-  explicit CompositePublisher(node::Node& node) : node_(node) {}
+  // `node` must outlive this object.
+  explicit CompositePublisher(node::Node& node)
+      : publisher_(node, "render/composite", {.slot_count = 8, .history = 2}) {}
   // Publishes the width x height `composite` under `header` (the camera image's).
   void Publish(const msgs::Header& header, int width, int height,
                const render::Composite& composite);
 
  private:
-  node::Node& node_;
-  std::optional<bus::Publisher> publisher_;
-  uint32_t width_ = 0, height_ = 0;
+  node::GrowingPublisher<msgs::Image> publisher_;
 };
 
 }  // namespace probeless::renderer_node

@@ -7,9 +7,10 @@
 namespace probeless::scene_light {
 
 SceneOutputs::SceneOutputs(node::Node& node, bool publish_transfer)
-    : node_(node),
-      publish_transfer_(publish_transfer),
-      light_pub_(node.CreatePublisher<msgs::ShLight>("scene/light")) {}
+    : publish_transfer_(publish_transfer),
+      light_pub_(node.CreatePublisher<msgs::ShLight>("scene/light")),
+      transfer_pub_(node, "scene/transfer"),
+      indirect_pub_(node, "scene/indirect") {}
 
 bool SceneOutputs::Publish(const msgs::Header& header, const light::ScenePipelineResult& r) {
   const light::LightEstimate& e = r.light;
@@ -27,34 +28,22 @@ bool SceneOutputs::Publish(const msgs::Header& header, const light::ScenePipelin
   if (publish_transfer_) {
     const uint32_t w = result.width, h = result.height, cc = result.coefficient_count;
     const size_t bytes = msgs::TransferBuffer::MessageBytesFor(w, h, cc);
-    if (!transfer_pub_ || bytes > transfer_capacity_) {
-      transfer_pub_.reset();
-      transfer_pub_.emplace(node_.CreatePublisher<msgs::TransferBuffer>(
-          "scene/transfer", {.max_message_bytes = bytes}));
-      transfer_capacity_ = bytes;
-    }
-    bus::Loan loan = transfer_pub_->Borrow(bytes);
+    bus::Loan loan = transfer_pub_.Borrow(bytes);
     auto out = msgs::WriteMessage<msgs::TransferBuffer>(loan.data());
     out->header = header;
     out->Init(w, h, cc);
     const auto dst = msgs::TransferCoefficients(*out.message, out.payload);
     std::copy(result.transfer.begin(), result.transfer.end(), dst.begin());
-    transfer_pub_->Publish(std::move(loan));
+    transfer_pub_.Publish(std::move(loan));
   }
   if (r.has_indirect) {
     const size_t bytes =
         msgs::Image::MessageBytesFor(result.width, result.height, msgs::Encoding::kRgb32f);
-    if (!indirect_pub_ || bytes > indirect_capacity_) {
-      indirect_pub_.reset();
-      indirect_pub_.emplace(
-          node_.CreatePublisher<msgs::Image>("scene/indirect", {.max_message_bytes = bytes}));
-      indirect_capacity_ = bytes;
-    }
-    bus::Loan loan = indirect_pub_->Borrow(bytes);
+    bus::Loan loan = indirect_pub_.Borrow(bytes);
     auto out = msgs::WriteMessage<msgs::Image>(loan.data());
     out->header = header;
     light::FillIndirectImage(result, out.message, out.payload);
-    indirect_pub_->Publish(std::move(loan));
+    indirect_pub_.Publish(std::move(loan));
   }
   return e.valid;
 }

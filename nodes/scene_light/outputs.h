@@ -8,6 +8,7 @@
 #include "probeless/bus/bus.h"
 #include "probeless/light/pipeline.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 
 namespace probeless::scene_light {
@@ -23,11 +24,10 @@ class SceneOutputs {
   bool Publish(const msgs::Header& header, const light::ScenePipelineResult& r);
 
  private:
-  node::Node& node_;
   bool publish_transfer_;
   bus::Publisher light_pub_;
-  std::optional<bus::Publisher> transfer_pub_, indirect_pub_;
-  size_t transfer_capacity_ = 0, indirect_capacity_ = 0;
+  node::GrowingPublisher<msgs::TransferBuffer> transfer_pub_;
+  node::GrowingPublisher<msgs::Image> indirect_pub_;
 };
 
 }  // namespace probeless::scene_light
