@@ -158,11 +158,14 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
   }
 }
 
-std::array<double, 9> CameraToWorldRotation(const msgs::RigidTransform& camera_to_world) {
-  const msgs::Quaternion& q = camera_to_world.rotation;
+namespace {
+
+// The row-major rotation matrix of the normalised quaternion q; `what` (the public function)
+// names the caller in the error for a quaternion of norm 0 or not finite.
+std::array<double, 9> RotationOfQuaternion(const msgs::Quaternion& q, const char* what) {
   const double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
   if (!(n > 0) || !std::isfinite(n)) {
-    throw LightError("light::CameraToWorldRotation: the camera's rotation quaternion has norm " +
+    throw LightError(std::string(what) + ": the camera's rotation quaternion has norm " +
                      std::to_string(n) + ", expected a finite non-zero norm");
   }
   const double w = q.w / n, x = q.x / n, y = q.y / n, z = q.z / n;
@@ -171,15 +174,16 @@ std::array<double, 9> CameraToWorldRotation(const msgs::RigidTransform& camera_t
           2 * (x * z - w * y),     2 * (y * z + w * x),     1 - 2 * (x * x + y * y)};
 }
 
+}  // namespace
+
+std::array<double, 9> CameraToWorldRotation(const msgs::RigidTransform& camera_to_world) {
+  return RotationOfQuaternion(camera_to_world.rotation, "light::CameraToWorldRotation");
+}
+
 std::array<float, 3> WorldPointInCamera(const msgs::RigidTransform& camera_to_world,
                                         const std::array<double, 3>& world) {
-  const msgs::Quaternion& q = camera_to_world.rotation;
-  const double n = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
-  if (!(n > 0) || !std::isfinite(n)) {
-    throw LightError("light::WorldPointInCamera: the camera's rotation quaternion has norm " +
-                     std::to_string(n) + ", expected a finite non-zero norm");
-  }
-  const std::array<double, 9> r = CameraToWorldRotation(camera_to_world);
+  const std::array<double, 9> r =
+      RotationOfQuaternion(camera_to_world.rotation, "light::WorldPointInCamera");
   const msgs::Vector3& t = camera_to_world.translation;
   const double d[3] = {world[0] - t.x, world[1] - t.y, world[2] - t.z};
   std::array<float, 3> out{};
