@@ -58,6 +58,19 @@ TEST(LayoutHashTest, DescriptionsDifferingInOneFieldHashDifferently) {
   EXPECT_EQ(hashes.size(), variants.size() + 1);
 }
 
+// A received frame_id is any bytes; the one-line errors that quote it escape it.
+TEST(FixedStringTest, PrintableTextEscapesWhatWouldBreakALine) {
+  EXPECT_EQ(PrintableText("camera_rgb"), "camera_rgb");
+  EXPECT_EQ(PrintableText(std::string_view("a\nb\\c\x7f\xff\0", 8)),
+            "a\\x0ab\\x5cc\\x7f\\xff\\x00");
+  CameraInfo info{};
+  std::memcpy(info.header.frame_id, "cam\nera", 8);
+  info.distortion_model = static_cast<DistortionModel>(9);
+  PROBELESS_EXPECT_THROWS_MESSAGE(info.Validate(), MessageError,
+                                  "probeless_msgs/CameraInfo 'cam\\x0aera': invalid distortion "
+                                  "model 9");
+}
+
 TEST(LayoutHashTest, DecimalFormatsNumbers) {
   EXPECT_EQ(layout::Decimal(0), "0");
   EXPECT_EQ(layout::Decimal(921600), "921600");

@@ -5,14 +5,17 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <thread>
 
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/growing_publisher.h"
+#include "probeless/node/main.h"
 #include "probeless/node/node.h"
 
 namespace probeless::node {
@@ -270,8 +273,141 @@ TEST_F(NodeBusTest, SpinAcknowledgesEveryInputAfterItsHandler) {
   EXPECT_EQ(WEXITSTATUS(status), 0);
 }
 
+// The bad-input rule of Node::Spin: an InputError from a handler rejects that sample only (one
+// error line, counted, acknowledged); the node goes on, and a summary line names the count.
+TEST_F(NodeBusTest, SpinRejectsABadSampleWithOneLineAndGoesOn) {
+  const std::string log_path = "/tmp/probeless_node_bus_test_reject_" + std::to_string(getpid());
+  const int status = RunInChild([&] {
+    if (!std::freopen(log_path.c_str(), "w", stderr)) return 39;
+    Node node(Argv({"--ros-args", "-r", "__ns:=/lab"}), "worker");
+    bus::Subscriber acks("/lab/worker/ack", msgs::TopicTypeOf<msgs::Ack>(), Depth(16));
+    bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
+    bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
+    for (int i = 0; i < 3; ++i) {
+      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
+      msgs::WriteMessage<msgs::Pose>(loan.data());
+      pub.Publish(std::move(loan));
+    }
+    int handled = 0;
+    node.Spin({{&input, [&](bus::Sample&&) {
+                  ++handled;
+                  if (handled == 3) RequestShutdown();
+                  if (handled == 2) throw msgs::MessageError("pose: 12 bytes, expected 64");
+                }}});
+    if (handled != 3) return 40;
+    if (node.RejectedSamples() != std::map<std::string, uint64_t>{{"/lab/pose", 1}}) return 41;
+    for (int i = 0; i < 3; ++i) {
+      if (!acks.Take(1s)) return 42;  // the rejected sample is acknowledged too
+    }
+    return 0;
+  });
+  std::ifstream file(log_path);
+  const std::string log((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  std::remove(log_path.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << log;
+  EXPECT_NE(log.find("[error] [/lab/worker] rejected a sample of /lab/pose: pose: 12 bytes, "
+                     "expected 64\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("[warn] [/lab/worker] /lab/pose: rejected 1 of 3 samples\n"),
+            std::string::npos)
+      << log;
+}
+
+// RejectSample (Spin's rule, and for samples a handler takes itself): the first kLoggedRejections
+// per topic are logged, then every kRejectionLogPeriod-th with the count; the line drops a leading
+// "<topic>: " of the message and escapes control bytes; the run statistics count them.
+TEST_F(NodeBusTest, RejectionsAreLoggedOneByOneThenEveryHundredthAndCounted) {
+  const std::string log_path = "/tmp/probeless_node_bus_test_many_" + std::to_string(getpid());
+  const int status = RunInChild([&] {
+    if (!std::freopen(log_path.c_str(), "w", stderr)) return 39;
+    Node node(Argv({}), "worker");
+    for (int i = 0; i < 250; ++i) node.RejectSample("/depth", "/depth: bad\nbytes");
+    node.RejectSample("/image", "/imagery: kept");
+    const std::map<std::string, uint64_t> expected = {{"/depth", 250}, {"/image", 1}};
+    return node.RejectedSamples() == expected ? 0 : 40;
+  });
+  std::ifstream file(log_path);
+  const std::string log((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  std::remove(log_path.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << log;
+  const std::string line = "[error] [/worker] rejected a sample of /depth: bad\\x0abytes\n";
+  size_t lines = 0;
+  for (size_t at = log.find(line); at != std::string::npos; at = log.find(line, at + 1)) ++lines;
+  EXPECT_EQ(lines, kLoggedRejections) << log;
+  EXPECT_NE(log.find("[error] [/worker] rejected a sample of /depth: bad\\x0abytes (100 rejected "
+                     "so far; only every 100th is logged)\n"),
+            std::string::npos)
+      << log;
+  EXPECT_NE(log.find("(200 rejected so far"), std::string::npos) << log;
+  EXPECT_EQ(log.find("(150 rejected so far"), std::string::npos) << log;
+  EXPECT_NE(log.find("rejected a sample of /image: /imagery: kept\n"), std::string::npos) << log;
+}
+
+// A NodeError or UsageError (configuration), a BusError or any other exception from a handler
+// still ends Spin; an unknown parameter override ends it before it starts.
+TEST_F(NodeBusTest, SpinPassesConfigurationErrorsOnAndRefusesUnknownOverrides) {
+  const int status = RunInChild([] {
+    Node node(Argv({}), "worker");
+    bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
+    bus::Publisher pub("/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
+    bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
+    msgs::WriteMessage<msgs::Pose>(loan.data());
+    pub.Publish(std::move(loan));
+    const auto publish = [&] {
+      bus::Loan more = pub.Borrow(sizeof(msgs::Pose));
+      msgs::WriteMessage<msgs::Pose>(more.data());
+      pub.Publish(std::move(more));
+    };
+    try {
+      node.Spin({{&input, [](bus::Sample&&) { throw NodeError("bad config"); }}});
+      return 40;
+    } catch (const NodeError& e) {
+      if (std::string(e.what()) != "bad config") return 41;
+    }
+    publish();
+    try {
+      node.Spin({{&input, [](bus::Sample&&) { throw UsageError("bad usage"); }}});
+      return 45;
+    } catch (const UsageError&) {
+    }
+    publish();
+    try {
+      node.Spin({{&input, [](bus::Sample&&) { throw bus::BusError("bus broke"); }}});
+      return 46;
+    } catch (const bus::BusError&) {
+    }
+    publish();
+    try {
+      node.Spin({{&input, [](bus::Sample&&) { throw std::runtime_error("a bug"); }}});
+      return 47;
+    } catch (const std::runtime_error& e) {
+      if (std::string(e.what()) != "a bug") return 48;
+    }
+    if (!node.RejectedSamples().empty()) return 49;
+    Node typo(Argv({"--ros-args", "-p", "rat:=3"}), "typo");
+    typo.Param("rate", 1.0);
+    bool handled = false;
+    try {
+      typo.Spin({{&input, [&](bus::Sample&&) { handled = true; }}});
+      return 42;
+    } catch (const NodeError& e) {
+      if (std::string(e.what()) !=
+          "node '/typo': unknown parameter 'rat' (from -p); did you mean 'rate'?") {
+        return 43;
+      }
+    }
+    return handled ? 44 : 0;
+  });
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+}
+
 // With $PROBELESS_NODE_STATS, Node::Spin writes <dir>/<node>.json when it returns: the inputs
-// handled with their bus counters and handler times, the outputs published, every call.
+// handled with their bus counters, rejections and handler times, the outputs published, every
+// call.
 TEST_F(NodeBusTest, SpinWritesRunStatsWhenAsked) {
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("node_stats_" + std::to_string(getpid()));
@@ -293,7 +429,10 @@ TEST_F(NodeBusTest, SpinWritesRunStatsWhenAsked) {
                   bus::Loan loan = out.Borrow(sizeof(msgs::Pose));
                   msgs::WriteMessage<msgs::Pose>(loan.data());
                   out.Publish(std::move(loan));
-                  if (++handled == 3) RequestShutdown();
+                  if (++handled == 3) {
+                    RequestShutdown();
+                    throw msgs::MessageError("the third is rejected");
+                  }
                 }}});
     return 0;
   });
@@ -304,8 +443,8 @@ TEST_F(NodeBusTest, SpinWritesRunStatsWhenAsked) {
   std::filesystem::remove_all(dir);
   EXPECT_NE(text.find("\"node\": \"/lab/timed\""), std::string::npos) << text;
   const std::string input =
-      "{\"topic\": \"/lab/pose\", \"handled\": 3, \"received\": 3, \"dropped\": 0, "
-      "\"handler_ms\": {\"p50\": ";
+      "{\"topic\": \"/lab/pose\", \"handled\": 3, \"received\": 3, \"dropped\": 0, \"rejected\": "
+      "1, \"handler_ms\": {\"p50\": ";
   const size_t at = text.find(input);
   ASSERT_NE(at, std::string::npos) << text;
   EXPECT_GE(std::stod(text.substr(at + input.size())), 2.0) << text;  // the handler's 2 ms sleep

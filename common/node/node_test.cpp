@@ -318,6 +318,125 @@ TEST(ParamsTest, RequireParamAndIntrospection) {
   EXPECT_EQ(node.UnusedParamOverrides(), std::vector<std::string>{"typo_rate"});
 }
 
+TEST(ParamsTest, DescriptorsCheckRangesAndChoicesOfTheEffectiveValue) {
+  Node node(Argv({"--ros-args", "-p", "bands:=12", "-p", "rate:=0", "-p", "mode:=fast", "-p",
+                  "gains:=[0.5, 3.0]", "-p", "ok_rate:=2.5"}),
+            "talker");
+  const ParamDescriptor bands{.description = "SH bands", .min = 1.0, .max = 8.0};
+  PROBELESS_EXPECT_THROWS_MESSAGE(node.Param("bands", 4, bands), NodeError,
+                                  "node '/talker': parameter 'bands' = 12 (from -p) is out of "
+                                  "range: expected a value in [1, 8]");
+  const ParamDescriptor rate{.unit = "Hz", .min = 0.0, .min_exclusive = true};
+  PROBELESS_EXPECT_THROWS_MESSAGE(node.Param("rate", 30.0, rate), NodeError,
+                                  "node '/talker': parameter 'rate' = 0.0 (from -p) is out of "
+                                  "range: expected a value in (0, inf) Hz");
+  EXPECT_EQ(node.Param("ok_rate", 30.0, rate), 2.5);
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("mode", "gbuffer", {.choices = {"gbuffer", "depth"}}), NodeError,
+      "node '/talker': parameter 'mode' = \"fast\" (from -p) is not one of gbuffer|depth");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("gains", std::vector<double>{}, {.min = 0.0, .max = 2.0}), NodeError,
+      "node '/talker': parameter 'gains' = [0.5, 3.0] (from -p) is out of range: expected every "
+      "element in [0, 2]");
+  // The default is checked too: a default outside its own range is refused the same way.
+  PROBELESS_EXPECT_THROWS_MESSAGE(node.Param("lamps", -1, {.min = 0.0}), NodeError,
+                                  "node '/talker': parameter 'lamps' = -1 (from default) is out "
+                                  "of range: expected a value in [0, inf)");
+  PROBELESS_EXPECT_THROWS_MESSAGE(node.Param("gain", std::nan(""), {.max = 1.0}), NodeError,
+                                  "node '/talker': parameter 'gain' = .nan (from default) is out "
+                                  "of range: expected a value in (-inf, 1]");
+  EXPECT_EQ(node.Param("radius", 0.3, {.description = "SSDO radius", .unit = "m", .min = 0.0}),
+            0.3);
+  const std::vector<ParamInfo> declared = node.DeclaredParams();
+  const auto find = [&](std::string_view name) {
+    for (const ParamInfo& info : declared) {
+      if (info.name == name) return info;
+    }
+    return ParamInfo{};
+  };
+  EXPECT_EQ(find("radius").description, "SSDO radius");
+  EXPECT_EQ(find("radius").unit, "m");
+  EXPECT_EQ(find("radius").constraint, "[0, inf)");
+  EXPECT_EQ(find("ok_rate").constraint, "(0, inf)");
+  EXPECT_EQ(find("log_level").constraint, "");
+}
+
+TEST(ParamsTest, ChoicesApplyToEveryElementOfAStringArray) {
+  Node node(Argv({"--ros-args", "-p", "topics:=[image, dpeth]"}), "talker");
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      node.Param("topics", std::vector<std::string>{}, {.choices = {"image", "depth"}}), NodeError,
+      "node '/talker': parameter 'topics' = [\"image\", \"dpeth\"] (from -p) has an element that "
+      "is not one of image|depth");
+}
+
+TEST(ParamsTest, CheckParamOverridesNamesTheUnknownOneAndTheNearestDeclaredName) {
+  {
+    Node node(Argv({"--ros-args", "-p", "bandz:=3"}), "talker");
+    node.Param("bands", 4);
+    node.Param("rate", 30.0);
+    PROBELESS_EXPECT_THROWS_MESSAGE(
+        node.CheckParamOverrides(), NodeError,
+        "node '/talker': unknown parameter 'bandz' (from -p); did you mean 'bands'?");
+  }
+  {
+    Node node(Argv({"--ros-args", "-p", "completely_else:=3"}), "talker");
+    node.Param("bands", 4);
+    PROBELESS_EXPECT_THROWS_MESSAGE(node.CheckParamOverrides(), NodeError,
+                                    "node '/talker': unknown parameter 'completely_else' (from "
+                                    "-p); this node declares no parameter of that name");
+  }
+  {
+    Node node(Argv({"--ros-args", "-p", "bands:=3"}), "talker");
+    node.Param("bands", 4);
+    EXPECT_NO_THROW(node.CheckParamOverrides());
+  }
+}
+
+TEST(ParamsTest, CheckParamOverridesLeavesWildcardEntriesToTheNodesThatReadThem) {
+  TempDir dir;
+  const std::string file = dir.Write("shared.yaml", R"(
+/**:
+  ros__parameters:
+    use_sim_time: true
+    rate: 5
+talker:
+  ros__parameters:
+    sped: 2
+)");
+  {
+    Node node(Argv({"--ros-args", "--params-file", file}), "talker");
+    node.Param("speed", 1);
+    PROBELESS_EXPECT_THROWS_MESSAGE(node.CheckParamOverrides(), NodeError,
+                                    "node '/talker': unknown parameter 'sped' (from params file '" +
+                                        file + "'); did you mean 'speed'?");
+  }
+  {
+    // use_sim_time (wildcard only) is not this node's; rate, set again by -p, is checked.
+    Node node(Argv({"--ros-args", "--params-file", file, "-p", "rate:=7", "-p", "sped:=1"}),
+              "talker");
+    node.Param("sped", 1);
+    PROBELESS_EXPECT_THROWS_MESSAGE(node.CheckParamOverrides(), NodeError,
+                                    "node '/talker': unknown parameter 'rate' (from -p); this node "
+                                    "declares no parameter of that name");
+    node.Param("rate", 1);
+    EXPECT_NO_THROW(node.CheckParamOverrides());
+  }
+  {
+    // An exact entry stays checked when a later file's wildcard entry sets the same name.
+    const std::string later = dir.Write("later.yaml", R"(
+/**:
+  ros__parameters:
+    sped: 3
+)");
+    Node node(Argv({"--ros-args", "--params-file", file, "--params-file", later}), "talker");
+    node.Param("speed", 1);
+    node.Param("rate", 1);
+    PROBELESS_EXPECT_THROWS_MESSAGE(node.CheckParamOverrides(), NodeError,
+                                    "node '/talker': unknown parameter 'sped' (from params file '" +
+                                        later + "'); did you mean 'speed'?");
+  }
+}
+
 TEST(ParamsTest, PrecedenceCommandLineOverFilesOverDefault) {
   TempDir dir;
   const std::string first = dir.Write("first.yaml", R"(

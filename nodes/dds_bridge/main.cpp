@@ -103,9 +103,7 @@ int Run(int argc, char** argv) {
   }
   o.bus_slot_count = static_cast<uint32_t>(slots);
   const double stats_period = node.Param("stats_period_s", 5.0);
-  for (const std::string& unused : node.UnusedParamOverrides()) {
-    node.Warn() << "unknown parameter '" << unused << "' ignored";
-  }
+  node.CheckParamOverrides();
   if (o.to_dds.empty() && o.to_dds_regex.empty() && o.from_dds.empty() && o.from_dds_regex.empty()) {
     node.Warn() << "nothing to bridge (set to_dds, to_dds_regex, from_dds or from_dds_regex)";
   }

@@ -58,10 +58,7 @@ int Run(int argc, char** argv) {
   node::Node node(argc, argv, "face_light");
   const std::string model_path =
       ResolveModel(node.Param("model", "data/face_light/default_model.txt"));
-  const std::string mode = node.Param("mode", "rgb");
-  if (mode != "rgb" && mode != "gray") {
-    throw node::UsageError("face_light: mode must be rgb or gray, got '" + mode + "'");
-  }
+  const std::string mode = node.Param("mode", "rgb", {.choices = {"rgb", "gray"}});
   fl::EstimatorOptions eo;
   eo.back_prior = node.Param("back_prior", 0.1);
   eo.ridge = node.Param("ridge", 0.0);
@@ -72,17 +69,12 @@ int Run(int argc, char** argv) {
   eo.directional_robust = node.Param("directional_robust", eo.directional_robust);
   ft::SmootherOptions so;
   so.enabled = node.Param("smoothing", true);
-  so.alpha = node.Param("smoothing_alpha", so.alpha);
-  so.change_threshold = node.Param("change_threshold", so.change_threshold);
-  if (!(so.alpha > 0 && so.alpha <= 1) || !(so.change_threshold > 0)) {
-    throw node::UsageError(
-        "face_light: smoothing_alpha must be in (0, 1] and change_threshold > 0");
-  }
+  so.alpha =
+      node.Param("smoothing_alpha", so.alpha, {.min = 0.0, .max = 1.0, .min_exclusive = true});
+  so.change_threshold =
+      node.Param("change_threshold", so.change_threshold, {.min = 0.0, .min_exclusive = true});
   const std::string json_path = node.Param("json_path", "");
-  const std::string json_mode = node.Param("json_mode", "frame");
-  if (json_mode != "frame" && json_mode != "exit") {
-    throw node::UsageError("face_light: json_mode must be frame or exit, got '" + json_mode + "'");
-  }
+  const std::string json_mode = node.Param("json_mode", "frame", {.choices = {"frame", "exit"}});
 
   const bool linear_output = node.Param("linear_output", true);
   if (!json_path.empty() && !linear_output) {
@@ -100,11 +92,9 @@ int Run(int argc, char** argv) {
   std::copy(albedo.begin(), albedo.end(), lo.skin_albedo.begin());
   lo.unit_scale = node.Param("unit_scale", lo.unit_scale);
   ft::HoldOptions ho;
-  ho.min_confidence = node.Param("hold_confidence", ho.min_confidence);
-  ho.blend_time_s = node.Param("hold_blend_s", ho.blend_time_s);
-  if (!(ho.min_confidence >= 0 && ho.min_confidence <= 1) || !(ho.blend_time_s > 0)) {
-    throw node::UsageError("face_light: hold_confidence must be in [0, 1] and hold_blend_s > 0");
-  }
+  ho.min_confidence = node.Param("hold_confidence", ho.min_confidence, {.min = 0.0, .max = 1.0});
+  ho.blend_time_s =
+      node.Param("hold_blend_s", ho.blend_time_s, {.unit = "s", .min = 0.0, .min_exclusive = true});
 
   const fl::FaceLightModel model = fl::LoadModel(model_path);
   const fl::FaceLightEstimator estimator(model, eo);
@@ -138,10 +128,11 @@ int Run(int argc, char** argv) {
       return;
     }
     if (static_cast<int>(obs->sample_count) != estimator.SampleCount()) {
-      throw fl::FaceLightError("face_light: observation has " + std::to_string(obs->sample_count) +
-                               " samples but model '" + model_path + "' has " +
-                               std::to_string(estimator.SampleCount()) +
-                               " (the tracker must sample the same model)");
+      // Two models configured apart: no later observation can fit either, so the node ends.
+      throw node::NodeError("face_light: observation has " + std::to_string(obs->sample_count) +
+                            " samples but model '" + model_path + "' has " +
+                            std::to_string(estimator.SampleCount()) +
+                            " (the tracker must sample the same model)");
     }
     const std::span<const uint64_t> valid(obs->sample_valid);
     fl::LightEstimate e;

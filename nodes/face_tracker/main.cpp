@@ -127,9 +127,9 @@ int Run(int argc, char** argv) {
         view.format = ft::PixelFormat::kBgr;
         break;
       default:
-        throw node::UsageError("face_tracker: image encoding " +
-                               std::string(msgs::EncodingName(image->encoding)) +
-                               " not supported (expected rgb8, bgr8 or mono8)");
+        throw msgs::MessageError("face_tracker: image encoding " +
+                                 std::string(msgs::EncodingName(image->encoding)) +
+                                 " not supported (expected rgb8, bgr8 or mono8)");
     }
     const ft::Intrinsics k =
         intrinsics ? *intrinsics : ft::Intrinsics::Guess(view.width, view.height);

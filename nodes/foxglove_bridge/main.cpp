@@ -84,9 +84,7 @@ int Run(int argc, char** argv) {
     throw node::UsageError(
         "params rescan_period_s and time_period_s must be > 0, stats_period_s >= 0");
   }
-  for (const std::string& unused : node.UnusedParamOverrides()) {
-    node.Warn() << "unknown parameter '" << unused << "' ignored";
-  }
+  node.CheckParamOverrides();
   for (const node::ParamInfo& p : node.DeclaredParams()) {
     o.hub.parameters.push_back({node.fully_qualified_name() + "." + p.name, p.type, p.value});
   }

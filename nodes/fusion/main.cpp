@@ -111,10 +111,8 @@ int Run(int argc, char** argv) {
   }
   {
     const bool volume_default = options.normal_source == recon::NormalSource::kVolume;
-    const std::string normals = node.Param("normals", volume_default ? "volume" : "depth");
-    if (normals != "depth" && normals != "volume") {
-      throw node::NodeError("fusion: param normals must be depth or volume, got '" + normals + "'");
-    }
+    const std::string normals = node.Param("normals", volume_default ? "volume" : "depth",
+                                           {.choices = {"depth", "volume"}});
     options.normal_source =
         normals == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
   }
@@ -125,19 +123,12 @@ int Run(int argc, char** argv) {
   const std::string mesh_out = node.Param("mesh_out", "");
   const std::string world_frame = node.Param("world_frame", "world");
   const bool publish_aux = node.Param("publish_aux", false);
-  const int aux_pixels = node.Param("aux_pixels", 128);
+  const int aux_pixels = node.Param(
+      "aux_pixels", 128, {.unit = "px", .min = 1.0, .max = double{msgs::kMaxAuxiliaryViewPixels}});
   const bool aux_light = node.Param("aux_light", false);
   const double fail_on_lost_ratio = node.Param("fail_on_lost_ratio", -1.0);
-  if (aux_pixels < 1 || aux_pixels > static_cast<int>(msgs::kMaxAuxiliaryViewPixels)) {
-    throw node::NodeError("fusion: param aux_pixels must be in 1..4096, got " +
-                          std::to_string(aux_pixels));
-  }
   const std::string checkpoint_path = node.Param("checkpoint", "");
-  const int checkpoint_frames = node.Param("checkpoint_frames", 30);
-  if (checkpoint_frames < 1) {
-    throw node::NodeError("fusion: param checkpoint_frames must be >= 1, got " +
-                          std::to_string(checkpoint_frames));
-  }
+  const int checkpoint_frames = node.Param("checkpoint_frames", 30, {.min = 1.0});
   recon::FusionPipeline pipeline(options);
   std::optional<recon::CheckpointWriter> checkpoint;
   if (!checkpoint_path.empty()) {
@@ -166,7 +157,6 @@ int Run(int argc, char** argv) {
       node.Error() << e.what() << " (the map is not checkpointed)";
     }
   };
-  for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
 
   bus::Subscriber depth_sub = node.CreateSubscriber<msgs::Image>("camera/depth");
   bus::Subscriber image_sub = node.CreateSubscriber<msgs::Image>("camera/image");
@@ -252,8 +242,8 @@ int Run(int argc, char** argv) {
       return;
     }
     // A depth still waiting for its image is processed without colour now.
-    // Taken out of pending_depth before processing: a frame whose processing throws (a one-line
-    // error from `guarded`) is not processed a second time with the next depth.
+    // Taken out of pending_depth before processing: a frame whose processing throws (rejected
+    // by Spin with one error line) is not processed a second time with the next depth.
     if (pending_depth) {
       PendingDepth waiting = std::move(*pending_depth);
       pending_depth.reset();
@@ -284,17 +274,6 @@ int Run(int argc, char** argv) {
       pending_depth.reset();
       process(waiting, image);
     }
-  };
-  auto guarded = [&](auto fn) {
-    return [&node, fn](bus::Sample&& s) mutable {
-      try {
-        fn(std::move(s));
-      } catch (const recon::ReconError& e) {
-        node.Error() << e.what();  // bad input: reported, frame skipped
-      } catch (const msgs::MessageError& e) {
-        node.Error() << e.what();
-      }
-    };
   };
   std::vector<node::Handler> handlers = {
       {&info_sub,
@@ -332,7 +311,6 @@ int Run(int argc, char** argv) {
                           node.Debug() << "scene/light for an unknown stamp: ignored";
                         }});
   }
-  for (auto& h : handlers) h.on_sample = guarded(h.on_sample);
   node.Info() << "fusion: " << options.volume.resolution << "^3 voxels over "
               << options.volume.size_m << " m, " << options.threads << " threads";
   node.Spin(handlers);

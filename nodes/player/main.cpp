@@ -156,6 +156,7 @@ int Run(int argc, char** argv) {
   }
   bool keyboard = node.Param("keyboard", true);
   options.slot_count = static_cast<uint32_t>(node.Param<int64_t>("slots", 8));
+  node.CheckParamOverrides();
 
   const std::vector<std::string>& args = node.args();
   bool positional_seen = false;  // a positional SOURCE overrides param 'source'

@@ -203,9 +203,7 @@ int Run(int argc, char** argv) {
     s.compression = node->Param("compression", "none");
     s.queue_depth = node->Param<int64_t>("queue_depth", 64);
     s.chunk_size_mb = node->Param("chunk_size_mb", 8.0);
-    for (const std::string& unused : node->UnusedParamOverrides()) {
-      node->Warn() << "unknown parameter '" << unused << "' ignored";
-    }
+    node->CheckParamOverrides();
     if (!ParseCommandLine(node->args(), s)) {
       std::fputs(kUsage, stdout);
       return 0;

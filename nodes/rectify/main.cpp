@@ -12,8 +12,8 @@
 //
 // Params: alpha (-1: keep the calibrated K; 0..1 OpenCV free scaling), depth_interpolation
 // (nearest | edge_aware), depth_edge_tolerance (0.03, fraction of the depth), threads (1: OpenCV
-// threads of the remap). Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a malformed or
-// inconsistent camera_info or image (one line naming the topic), 1 otherwise.
+// threads of the remap). Exit: 0 on SIGINT/SIGTERM, 2 on bad params, 1 otherwise. A malformed or
+// inconsistent camera_info or image is rejected with one line naming the topic (node::Node::Spin).
 #include "probeless/node/main.h"
 
 #include <chrono>
@@ -41,26 +41,16 @@ struct Output {
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "rectify");
   rectify::RectifyOptions options;
-  options.alpha = node.Param("alpha", options.alpha);
-  const std::string interpolation = node.Param("depth_interpolation", "nearest");
-  if (interpolation == "nearest") {
-    options.depth_interpolation = rectify::DepthInterpolation::kNearest;
-  } else if (interpolation == "edge_aware") {
-    options.depth_interpolation = rectify::DepthInterpolation::kEdgeAware;
-  } else {
-    throw node::NodeError(
-        "rectify: param depth_interpolation must be nearest or edge_aware, got '" + interpolation +
-        "'");
-  }
-  options.depth_edge_tolerance = node.Param("depth_edge_tolerance", options.depth_edge_tolerance);
-  const int threads = node.Param("threads", 1);
-  if (threads < 1) throw node::NodeError("rectify: param threads must be >= 1");
-  if (!(options.alpha <= 1) || !(options.depth_edge_tolerance > 0)) {
-    throw node::NodeError(
-        "rectify: param alpha must be <= 1 (< 0 keeps K) and depth_edge_tolerance > 0");
-  }
+  options.alpha = node.Param("alpha", options.alpha, {.max = 1.0});  // < 0 keeps K
+  const std::string interpolation =
+      node.Param("depth_interpolation", "nearest", {.choices = {"nearest", "edge_aware"}});
+  options.depth_interpolation = interpolation == "nearest"
+                                    ? rectify::DepthInterpolation::kNearest
+                                    : rectify::DepthInterpolation::kEdgeAware;
+  options.depth_edge_tolerance = node.Param("depth_edge_tolerance", options.depth_edge_tolerance,
+                                            {.min = 0.0, .min_exclusive = true});
+  const int threads = node.Param("threads", 1, {.min = 1.0});
   rectify::SetThreads(threads);
-  for (const auto& unused : node.UnusedParamOverrides()) node.Warn() << "unused param " << unused;
 
   const std::string info_topic = node.ResolveTopicName("camera_info");
   const std::string image_topic = node.ResolveTopicName("image");

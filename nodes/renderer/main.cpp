@@ -365,7 +365,13 @@ int Run(int argc, char** argv) {
     }
     renderer.Render(in, composite);
     composite_pub.Publish(camera_header, width, height, composite);
-    if (writer) writer->Write(composite);
+    if (writer) {
+      try {
+        writer->Write(composite);
+      } catch (const render::RenderError& e) {
+        throw node::NodeError(e.what());  // the output, not this sample: the node ends
+      }
+    }
     if (backend == render::Backend::kWindow) {
       render::ViewerInputs vin;
       vin.light = &light;

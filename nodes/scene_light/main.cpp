@@ -54,8 +54,8 @@
 //   message is one error line and the frame runs without views). The lamp positions are not in
 //   msgs::ShLight: they go to the debug log. The point fit starts from the previous frame's lamp
 //   while the point model is in use (light::PointLightTracker).
-// Exit: 0 on SIGINT/SIGTERM, 2 on bad params or a bad input message (one line on stderr), 1
-// otherwise.
+// Exit: 0 on SIGINT/SIGTERM, 2 on bad params (one line on stderr), 1 otherwise. A bad input
+// message is rejected with one error line and counted (node::Node::Spin); the node goes on.
 #include "probeless/node/main.h"
 
 #include <chrono>
@@ -99,10 +99,12 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   eo.direction_bands = node.Param("direction_bands", 2);
   eo.albedo_groups = node.Param("albedo_groups", 32);
   eo.max_rows_per_bin = node.Param("max_rows_per_bin", 100);
-  eo.max_intensity = static_cast<float>(node.Param("max_intensity", double{eo.max_intensity}));
+  eo.max_intensity = static_cast<float>(
+      node.Param("max_intensity", double{eo.max_intensity},
+                 {.unit = "linear grey", .min = eo.min_intensity, .min_exclusive = true}));
   // The light prior (light::LightPrior; chosen on the evaluation world's train / validation
   // splits, docs/light.md "Light prior").
-  eo.prior.weight = node.Param("prior_weight", static_cast<double>(eo.prior.weight));
+  eo.prior.weight = node.Param("prior_weight", static_cast<double>(eo.prior.weight), {.min = 0.0});
   eo.prior.zonal = {1.0f, static_cast<float>(node.Param("prior_z1", double{eo.prior.zonal[1]})),
                     static_cast<float>(node.Param("prior_z2", double{eo.prior.zonal[2]})),
                     static_cast<float>(node.Param("prior_z3", double{eo.prior.zonal[3]}))};
@@ -112,25 +114,15 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.focus.floor = static_cast<float>(node.Param("focus_floor", double{po.focus.floor}));
   po.uncertainty_blur =
       static_cast<float>(node.Param("uncertainty_blur", double{po.uncertainty_blur}));
-  if (!(eo.prior.weight >= 0)) {
-    throw node::UsageError("scene_light: prior_weight must be >= 0, got " +
-                           std::to_string(eo.prior.weight));
-  }
-  const std::string gbuffer_normals = node.Param("gbuffer_normals", "fusion");
-  if (gbuffer_normals != "fusion" && gbuffer_normals != "depth") {
-    throw node::UsageError("scene_light: gbuffer_normals must be fusion or depth, got '" +
-                           gbuffer_normals + "'");
-  }
+  const std::string gbuffer_normals =
+      node.Param("gbuffer_normals", "fusion", {.choices = {"fusion", "depth"}});
   // "depth": central differences max(2, w / 160) apart on G_r's depth (denoised by the merge).
   po.gbuffer_normals =
       gbuffer_normals == "depth" ? light::GBufferNormals::kCentral : light::GBufferNormals::kGiven;
   po.normal_filter = node.Param("normal_filter", false);
   light::DepthGeometryOptions& dgo = po.depth_geometry;
-  const std::string depth_normals = node.Param("depth_normals", "auto");
-  if (depth_normals != "auto" && depth_normals != "edge" && depth_normals != "central") {
-    throw node::UsageError("scene_light: depth_normals must be auto, edge or central, got '" +
-                           depth_normals + "'");
-  }
+  const std::string depth_normals =
+      node.Param("depth_normals", "auto", {.choices = {"auto", "edge", "central"}});
   dgo.normals_from = depth_normals == "auto"   ? light::DepthNormals::kAuto
                      : depth_normals == "edge" ? light::DepthNormals::kEdge
                                                : light::DepthNormals::kCentral;
@@ -141,8 +133,9 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   po.temporal.frames = node.Param("temporal_frames", 1);
   po.temporal.forgetting = static_cast<float>(node.Param("forgetting", 0.5));
   po.temporal.reset_ratio = static_cast<float>(node.Param("temporal_reset_ratio", 1.3));
-  po.light_model = light::ParseLightModel(node.Param("light_model", "auto"));  // LightError if bad
-  po.point.max_lamps = node.Param("lamps", 1);
+  po.light_model = light::ParseLightModel(
+      node.Param("light_model", "auto", {.choices = {"auto", "distant", "point"}}));
+  po.point.max_lamps = node.Param("lamps", 1, {.min = 1.0, .max = 2.0});
   // Cast shadows: off by default, because in the evaluation world's rooms (validation split) the
   // directions the search accepts are wrong more often than right; on for scenes under a clear sun
   // with their occluders in view. On raw sensor depth (depth mode) only with the image cues
@@ -154,9 +147,9 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   // (light::RawDepthShadowOptions). depth mode: the search's on the depth image.
   po.shadow.image_cues = mode == "gbuffer" && image_cues;
   po.depth_image_cues = mode == "gbuffer" || image_cues;
-  po.shadow.stride = node.Param("shadow_stride", 8);
-  po.shadow.min_contrast =
-      static_cast<float>(node.Param("shadow_min_contrast", double{po.shadow.min_contrast}));
+  po.shadow.stride = node.Param("shadow_stride", 8, {.unit = "px", .min = 1.0});
+  po.shadow.min_contrast = static_cast<float>(
+      node.Param("shadow_min_contrast", double{po.shadow.min_contrast}, {.min = 1.0}));
   po.shadows_override_prior = node.Param("shadows_override_prior", true);
   // The published confidence on the ShLight scale (light::ScenePipelineOptions::confidence_knots);
   // raw_confidence publishes the fit's own (the input of tools/light_prior/fit_confidence.py).
@@ -164,23 +157,6 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
       node.Param("confidence_calibration", light::DefaultSceneConfidenceKnots(po.source));
   if (node.Param("raw_confidence", false)) po.confidence_knots->clear();
   po.shadow.threads = to.threads;
-  if (!(eo.max_intensity > eo.min_intensity)) {
-    throw node::UsageError("scene_light: max_intensity must be above " +
-                           std::to_string(eo.min_intensity) + " (linear grey), got " +
-                           std::to_string(eo.max_intensity));
-  }
-  if (!(po.shadow.min_contrast >= 1)) {
-    throw node::UsageError("scene_light: shadow_min_contrast must be >= 1 (a ratio), got " +
-                           std::to_string(po.shadow.min_contrast));
-  }
-  if (po.shadow.stride < 1) {
-    throw node::UsageError("scene_light: shadow_stride must be >= 1, got " +
-                           std::to_string(po.shadow.stride));
-  }
-  if (po.point.max_lamps < 1 || po.point.max_lamps > 2) {
-    throw node::UsageError("scene_light: lamps must be 1 or 2, got " +
-                           std::to_string(po.point.max_lamps));
-  }
   if (po.light_model != light::LightModel::kDistant && po.temporal.frames > 1) {
     // The temporal accumulator is a distant-light fit: the default auto gives way to it.
     if (node.HasParamOverride("light_model")) {
@@ -198,11 +174,8 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
   // gbuffer mode: the shadow search on the frame's own depth image (aligned with the camera image,
   // with the image cues) instead of G_r, whose merged depth and the image disagree at shadow edges
   // (measured in docs/light.md "Cast shadows").
-  const std::string shadow_depth = node.Param("shadow_depth", "raw");
-  if (shadow_depth != "raw" && shadow_depth != "gbuffer") {
-    throw node::UsageError("scene_light: shadow_depth must be raw or gbuffer, got '" +
-                           shadow_depth + "'");
-  }
+  const std::string shadow_depth =
+      node.Param("shadow_depth", "raw", {.choices = {"raw", "gbuffer"}});
   po.shadow_geometry = shadow_depth == "raw" ? light::ShadowGeometry::kDepthImage
                                              : light::ShadowGeometry::kGeometryBuffer;
   po.indirect = node.Param("publish_indirect", false);
@@ -211,18 +184,11 @@ light::ScenePipelineOptions OptionsFromParams(node::Node& node, const std::strin
 
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "scene_light");
-  const std::string mode = node.Param("mode", "gbuffer");
-  if (mode != "gbuffer" && mode != "depth") {
-    throw node::UsageError("scene_light: mode must be gbuffer or depth, got '" + mode + "'");
-  }
+  const std::string mode = node.Param("mode", "gbuffer", {.choices = {"gbuffer", "depth"}});
   const light::ScenePipelineOptions po = OptionsFromParams(node, mode);
   const bool publish_transfer = node.Param("publish_transfer", true);
   const bool use_aux = node.Param("use_aux", false);
-  const int aux_wait_ms = node.Param("aux_wait_ms", 50);
-  if (aux_wait_ms < 0) {
-    throw node::UsageError("scene_light: aux_wait_ms must be >= 0, got " +
-                           std::to_string(aux_wait_ms));
-  }
+  const int aux_wait_ms = node.Param("aux_wait_ms", 50, {.unit = "ms", .min = 0.0});
   if (use_aux && mode != "gbuffer") {
     throw node::UsageError("scene_light: use_aux needs mode gbuffer (the views come from fusion)");
   }
@@ -266,12 +232,17 @@ int Run(int argc, char** argv) {
     const auto d = msgs::ReadMessage<msgs::Image>(s.data());
     raw_depths.Add(d->header.stamp_ns, node::HeldMessage(s.data()));
   };
-  // Takes (and acks, as Spin would) the samples of `sub` Spin has not handed over yet.
+  // Takes (and acks, as Spin would) the samples of `sub` Spin has not handed over yet; a bad one
+  // is rejected under its own topic, as Spin would, and the G_r goes on without it.
   auto take_queued = [&](bus::Subscriber& sub, auto& hold) {
     while (auto s = sub.TryTake()) {
       const bus::MessageInfo received = s->info();
-      hold(std::move(*s));
       node.Ack(sub, received);
+      try {
+        hold(std::move(*s));
+      } catch (const msgs::MessageError& e) {
+        node.RejectSample(sub.topic(), e.what());
+      }
     }
   };
   // Taken in the G_r's handler (matched by stamp), not by Spin.

@@ -209,6 +209,7 @@ int Run(int argc, char** argv) {
   player_options.as_fast_as_possible = node.Param("fast", false);
   player_options.loop = node.Param("loop", false);
   player_options.lockstep_nodes = node.Param("lockstep", std::vector<std::string>{});
+  node.CheckParamOverrides();
 
   const std::vector<std::string>& args = node.args();
   bool positional_seen = false;

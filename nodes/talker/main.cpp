@@ -1,9 +1,9 @@
 // talker: example node publishing synthetic Images on "chatter" at a fixed rate.
 //
 // Params:
-//   width, height (int, 640 x 480)   image size in pixels
-//   encoding (string, "rgb8")        rgb8, bgr8, mono8, mono16, depth16 or float32
-//   rate_hz (double, 10)             publishing rate
+//   width, height (int, 640 x 480)   image size in pixels, 1..65535
+//   encoding (string, "rgb8")        rgb8, bgr8, mono8, mono16, depth16, float32 or rgb32f
+//   rate_hz (double, 10)             publishing rate, Hz (> 0)
 //   count (int, 0)                   stop after this many messages (0 = until SIGINT/SIGTERM)
 //   wait_for_subscribers (int, 0)    do not start before this many subscribers joined
 //   history (int, 0)                 messages kept for late-joining subscribers
@@ -24,17 +24,21 @@ using probeless::msgs::Image;
 
 int Run(int argc, char** argv) {
   probeless::node::Node node(argc, argv, "talker");
-  const int width = node.Param("width", 640);
-  const int height = node.Param("height", 480);
-  const Encoding encoding = probeless::msgs::EncodingFromName(node.Param("encoding", "rgb8"));
-  const double rate_hz = node.Param("rate_hz", 10.0);
-  const int64_t count = node.Param<int64_t>("count", 0);
-  const int wait_for_subscribers = node.Param("wait_for_subscribers", 0);
-  const int history = node.Param("history", 0);
+  using probeless::node::ParamDescriptor;
+  const ParamDescriptor size{.unit = "px", .min = 1.0, .max = 65535.0};
+  const int width = node.Param("width", 640, size);
+  const int height = node.Param("height", 480, size);
+  const Encoding encoding = probeless::msgs::EncodingFromName(
+      node.Param("encoding", "rgb8",
+                 {.choices = {"rgb8", "bgr8", "mono8", "mono16", "depth16", "float32", "rgb32f"}}));
+  const double rate_hz =
+      node.Param("rate_hz", 10.0, {.unit = "Hz", .min = 0.0, .min_exclusive = true});
+  const int64_t count = node.Param<int64_t>(
+      "count", 0, {.description = "messages to publish, 0: until a signal", .min = 0.0});
+  const int wait_for_subscribers = node.Param("wait_for_subscribers", 0, {.min = 0.0});
+  const int history = node.Param("history", 0, {.min = 0.0});
   const std::string frame_id = node.Param("frame_id", "camera");
-  if (width <= 0 || height <= 0) {
-    throw probeless::node::NodeError("talker: width and height must be > 0");
-  }
+  node.CheckParamOverrides();
 
   const size_t message_bytes =
       Image::MessageBytesFor(static_cast<uint32_t>(width), static_cast<uint32_t>(height), encoding);

@@ -586,6 +586,9 @@ void BindNode(py::module_& m) {
       .def_readonly("type", &node::ParamInfo::type)
       .def_readonly("value", &node::ParamInfo::value)
       .def_readonly("source", &node::ParamInfo::source)
+      .def_readonly("description", &node::ParamInfo::description)
+      .def_readonly("unit", &node::ParamInfo::unit)
+      .def_readonly("constraint", &node::ParamInfo::constraint)
       .def("__repr__", [](const node::ParamInfo& p) {
         return "<ParamInfo " + p.name + ": " + p.type + " = " + p.value + " (" + p.source + ")>";
       });
@@ -633,6 +636,10 @@ void BindNode(py::module_& m) {
            [](const PyNode& n, const std::string& name) { return n.Get().HasParamOverride(name); })
       .def("declared_params", [](const PyNode& n) { return n.Get().DeclaredParams(); })
       .def("unused_param_overrides", [](const PyNode& n) { return n.Get().UnusedParamOverrides(); })
+      .def(
+          "check_param_overrides", [](const PyNode& n) { n.Get().CheckParamOverrides(); },
+          "Raises NodeError for an override no param() call has read (wildcard params-file "
+          "entries excepted), naming the nearest declared parameter.")
       .def(
           "resolve_topic_name",
           [](const PyNode& n, const std::string& name) { return n.Get().ResolveTopicName(name); },

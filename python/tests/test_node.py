@@ -37,6 +37,18 @@ def test_ros_arguments_params_remaps_and_namespaces():
     assert publisher.topic == "/remapped"
 
 
+def test_unknown_overrides_are_node_errors_naming_the_nearest_param():
+    node = probeless.Node("talker", argv=["prog", "--ros-args", "-p", "rate_hx:=5"])
+    node.param("rate_hz", 30.0)
+    assert node.unused_param_overrides() == ["rate_hx"]
+    with pytest.raises(probeless.NodeError,
+                       match=r"^node '/talker': unknown parameter 'rate_hx' \(from -p\); "
+                             r"did you mean 'rate_hz'\?$"):
+        node.check_param_overrides()
+    node.param("rate_hx", 1)
+    node.check_param_overrides()
+
+
 def test_bad_params_are_node_errors():
     node = probeless.Node("talker", argv=["prog", "--ros-args", "-p", "rate_hz:=fast"])
     with pytest.raises(probeless.NodeError, match="rate_hz"):

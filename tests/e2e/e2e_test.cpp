@@ -465,8 +465,8 @@ TEST_F(EndToEnd, ANodeThatFailsEndsTheGraphInsteadOfStallingIt) {
                      " face:=false scene:=true scene_light_mode:=lidar",
                  dir.path());
   EXPECT_EQ(r.code, 1) << r.err;
-  EXPECT_NE(r.err.find("[scene_light] [error] [scene_light] scene_light: mode must be gbuffer or "
-                       "depth, got 'lidar'"),
+  EXPECT_NE(r.err.find("[scene_light] [error] [scene_light] node '/scene_light': parameter 'mode' "
+                       "= \"lidar\" (from -p) is not one of gbuffer|depth"),
             std::string::npos)
       << r.err;
   EXPECT_NE(r.err.find("[probeless] required node scene_light finished; stopping"),

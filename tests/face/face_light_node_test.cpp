@@ -112,9 +112,10 @@ TEST(FaceLightNodeTest, BadParamsExitTwoWithOneLine) {
   const auto b = probeless::testing::RunCommand(
       std::string(PROBELESS_BIN_DIR) + "/face_light --ros-args -p hold_blend_s:=0", dir.path());
   EXPECT_EQ(b.code, 2);
-  EXPECT_EQ(b.err,
-            "[error] [face_light] face_light: hold_confidence must be in [0, 1] and hold_blend_s > "
-            "0\n");
+  EXPECT_EQ(
+      b.err,
+      "[error] [face_light] node '/face_light': parameter 'hold_blend_s' = 0.0 (from -p) is out "
+      "of range: expected a value in (0, inf) s\n");
   const auto c = probeless::testing::RunCommand(
       std::string(PROBELESS_BIN_DIR) +
           "/face_light --ros-args -p linear_output:=false -p json_path:=lights.jsonl",

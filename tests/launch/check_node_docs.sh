@@ -92,7 +92,7 @@ check() {
 
 if [ "${1:-}" = "--self-test" ]; then
   # A synthetic tree: node alpha (params in the call forms the check knows, one split over two
-  # lines) and capture node beta (common capture params), fully documented; then one row and one
+  # lines, one with a ParamDescriptor) and capture node beta (common capture params), fully documented; then one row and one
   # section removed.
   tmp=$(mktemp -d)
   trap 'rm -rf "$tmp"' EXIT
@@ -102,6 +102,7 @@ const double speed = node.Param("speed", 1.0);
 const auto names = node.Param<std::vector<std::string>>("names", {});
 const int gap = node.Param(
     "gap", 2);
+const std::string mode = node.Param("mode", "a", {.choices = {"a", "b"}});
 CPP
   cat > "$tmp/nodes/beta/main.cpp" <<'CPP'
 if (node.HasParamOverride("gain")) o.gain = node.Param("gain", 1.0);
@@ -117,6 +118,7 @@ CPP
 | `speed` | double | 1.0 | m/s | |
 | `names` | string list | `[]` | | |
 | `gap` | int | 2 | px | |
+| `mode` | string | `a` | | a or b |
 
 ## beta
 
@@ -139,6 +141,8 @@ MD
   cp "$tmp/docs/nodes.md" "$tmp/complete.md"
   grep -vF '| `gap` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
   expect_failure "a missing row" "node 'alpha': param 'gap'"
+  grep -vF '| `mode` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
+  expect_failure "a missing row of a declared param" "node 'alpha': param 'mode'"
   grep -vF '| `frame_id` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
   expect_failure "a missing common capture row" "node 'beta': common capture param 'frame_id'"
   grep -vF '| `focus` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"

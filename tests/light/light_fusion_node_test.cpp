@@ -133,7 +133,9 @@ TEST(LightFusionNodeTest, BadParamsExitTwoWithOneLine) {
   const auto r = probeless::testing::RunCommand(
       std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p max_age_s:=0", dir.path());
   EXPECT_EQ(r.code, 2);
-  EXPECT_EQ(r.err, "[error] [light_fusion] param max_age_s must be > 0\n");
+  EXPECT_EQ(r.err,
+            "[error] [light_fusion] node '/light_fusion': parameter 'max_age_s' = 0.0 (from -p) is "
+            "out of range: expected a value in (0, inf) s\n");
   const auto u = probeless::testing::RunCommand(
       std::string(PROBELESS_BIN_DIR) + "/light_fusion --ros-args -p face_units:=gamma", dir.path());
   EXPECT_EQ(u.code, 2);

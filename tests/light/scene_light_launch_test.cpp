@@ -166,26 +166,36 @@ std::pair<int, std::string> RunSceneLight(const std::string& params) {
 TEST(SceneLightLaunch, BadModeIsAOneLineError) {
   const auto [status, log] = RunSceneLight("-p mode:=lidar");
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2);
-  EXPECT_EQ(log, "[error] [scene_light] scene_light: mode must be gbuffer or depth, got 'lidar'\n");
+  EXPECT_EQ(log,
+            "[error] [scene_light] node '/scene_light': parameter 'mode' = \"lidar\" (from -p) is "
+            "not one of gbuffer|depth\n");
   const auto [status2, log2] = RunSceneLight("-p gbuffer_normals:=volume");
   EXPECT_TRUE(WIFEXITED(status2) && WEXITSTATUS(status2) == 2);
   EXPECT_EQ(log2,
-            "[error] [scene_light] scene_light: gbuffer_normals must be fusion or depth, got "
-            "'volume'\n");
+            "[error] [scene_light] node '/scene_light': parameter 'gbuffer_normals' = \"volume\" "
+            "(from -p) is not one of fusion|depth\n");
   const auto [status3, log3] = RunSceneLight("-p shadow_depth:=tsdf");
   EXPECT_TRUE(WIFEXITED(status3) && WEXITSTATUS(status3) == 2);
   EXPECT_EQ(log3,
-            "[error] [scene_light] scene_light: shadow_depth must be raw or gbuffer, got 'tsdf'\n");
+            "[error] [scene_light] node '/scene_light': parameter 'shadow_depth' = \"tsdf\" (from "
+            "-p) is not one of raw|gbuffer\n");
   const auto [status4, log4] = RunSceneLight("-p max_intensity:=0.001");
   EXPECT_TRUE(WIFEXITED(status4) && WEXITSTATUS(status4) == 2);
-  EXPECT_EQ(log4,
-            "[error] [scene_light] scene_light: max_intensity must be above 0.004000 (linear "
-            "grey), got 0.001000\n");
+  EXPECT_EQ(
+      log4,
+      "[error] [scene_light] node '/scene_light': parameter 'max_intensity' = 0.001 (from -p) "
+      "is out of range: expected a value in (0.004, inf) linear grey\n");
   const auto [status5, log5] = RunSceneLight("-p shadow_min_contrast:=0.5");
   EXPECT_TRUE(WIFEXITED(status5) && WEXITSTATUS(status5) == 2);
-  EXPECT_EQ(log5,
-            "[error] [scene_light] scene_light: shadow_min_contrast must be >= 1 (a ratio), got "
-            "0.500000\n");
+  EXPECT_EQ(
+      log5,
+      "[error] [scene_light] node '/scene_light': parameter 'shadow_min_contrast' = 0.5 (from "
+      "-p) is out of range: expected a value in [1, inf)\n");
+  const auto [status6, log6] = RunSceneLight("-p bandz:=3");
+  EXPECT_TRUE(WIFEXITED(status6) && WEXITSTATUS(status6) == 2);
+  EXPECT_EQ(log6,
+            "[error] [scene_light] node '/scene_light': unknown parameter 'bandz' (from -p); did "
+            "you mean 'bands'?\n");
 }
 
 std::string ReadFile(const std::string& path) {

@@ -307,7 +307,10 @@ TEST(FusionRestart, ABadCheckpointIsABadParam) {
                             "': not a fusion checkpoint (expected it to start with PLFUSMAP)\n");
   testing::Process frames("fusion", {"--ros-args", "-p", "checkpoint_frames:=0"});
   EXPECT_EQ(frames.Wait(20s), 2);
-  EXPECT_EQ(frames.Err(), "[error] [fusion] fusion: param checkpoint_frames must be >= 1, got 0\n");
+  EXPECT_EQ(
+      frames.Err(),
+      "[error] [fusion] node '/fusion': parameter 'checkpoint_frames' = 0 (from -p) is out of "
+      "range: expected a value in [1, inf)\n");
 }
 
 }  // namespace

@@ -135,9 +135,7 @@ int RunCaptureNode(node::Node& node, const DeviceOpener& open) {
   s.stall_timeout_s = node.Param("stall_timeout_s", 1.0);
   s.max_frames = static_cast<uint64_t>(node.Param<int64_t>("max_frames", 0));
   s.slots = static_cast<uint32_t>(node.Param<int64_t>("slots", 8));
-  for (const std::string& unused : node.UnusedParamOverrides()) {
-    node.Warn() << "unknown parameter '" << unused << "' (ignored)";
-  }
+  node.CheckParamOverrides();
 
   std::unique_ptr<bus::Publisher> image;
   std::unique_ptr<bus::Publisher> depth;

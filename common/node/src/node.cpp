@@ -8,17 +8,20 @@
 #include <atomic>
 #include <cctype>
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <sstream>
 
 #include "arguments.h"
 #include "names.h"
 #include "params.h"
 #include "probeless/msgs/replay.h"
+#include "probeless/node/main.h"
 
 namespace probeless::node {
 
@@ -130,6 +133,51 @@ std::string StatsFileName(std::string fqn) {
   return (fqn.empty() ? std::string("root") : fqn) + ".json";
 }
 
+std::string FormatBound(double v) {
+  if (std::isinf(v)) return "inf";
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
+// "[1, 8]", "(0, inf)", "[-inf, 3]".
+std::string RangeText(const ParamDescriptor& d) {
+  return std::string(d.min && !d.min_exclusive ? "[" : "(") +
+         (d.min ? FormatBound(*d.min) : "-inf") + ", " + (d.max ? FormatBound(*d.max) : "inf") +
+         (d.max ? "]" : ")");
+}
+
+std::string JoinChoices(const std::vector<std::string>& choices) {
+  std::string out;
+  for (const std::string& c : choices) out += (out.empty() ? "" : "|") + c;
+  return out;
+}
+
+// ParamInfo::constraint of a descriptor.
+std::string ConstraintText(const ParamDescriptor& d) {
+  if (d.min || d.max) return RangeText(d);
+  if (!d.choices.empty()) return "one of " + JoinChoices(d.choices);
+  return {};
+}
+
+const ParamDescriptor kLogLevelDescriptor{.description = "lowest level of the lines logged"};
+
+// Levenshtein distance, for "did you mean" on unknown parameters.
+size_t EditDistance(std::string_view a, std::string_view b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diagonal = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
 }  // namespace
 
 std::string_view LogLevelName(LogLevel level) {
@@ -163,6 +211,7 @@ struct Node::Impl {
     ParamValue value;
     std::string source;
     bool used = false;
+    bool wildcard = false;  // set only by wildcard params-file entries: not checked when unused
   };
   struct Remap {
     std::string from;  // fully qualified
@@ -177,8 +226,9 @@ struct Node::Impl {
   std::vector<Remap> remaps;
   std::map<std::string, Override, std::less<>> overrides;
   std::vector<ParamInfo> declared;
-  mutable std::mutex mutex;  // guards overrides and declared
-  std::mutex ack_mutex;      // guards ack_publisher and acks
+  std::map<std::string, uint64_t> rejected;  // Spin's rejected samples per resolved topic
+  mutable std::mutex mutex;                  // guards overrides, declared and rejected
+  std::mutex ack_mutex;                      // guards ack_publisher and acks
   std::optional<bus::Publisher> ack_publisher;
   uint64_t acks = 0;
   int64_t created_mono_ns = MonotonicNs();
@@ -240,7 +290,11 @@ struct Node::Impl {
           if (entry.wildcard != wildcard_pass) continue;
           if (!internal::MatchNodePattern(entry.pattern, fqn)) continue;
           for (const auto& [param, value] : entry.params) {
-            overrides[param] = {value, "params file '" + path + "'"};
+            // An exact entry keeps the override checked even if a later file's wildcard sets it.
+            auto it = overrides.find(param);
+            const bool only_wildcards =
+                entry.wildcard && (it == overrides.end() || it->second.wildcard);
+            overrides[param] = {value, "params file '" + path + "'", false, only_wildcards};
           }
         }
       }
@@ -277,8 +331,8 @@ struct Node::Impl {
     }
   }
 
-  void Declare(std::string_view param, std::string_view type, std::string value,
-               std::string source) {
+  void Declare(std::string_view param, std::string_view type, std::string value, std::string source,
+               const ParamDescriptor& descriptor) {
     for (ParamInfo& info : declared) {
       if (info.name != param) continue;
       if (info.type != type) {
@@ -287,10 +341,74 @@ struct Node::Impl {
       }
       info.value = std::move(value);
       info.source = std::move(source);
+      if (!descriptor.description.empty()) info.description = descriptor.description;
+      if (!descriptor.unit.empty()) info.unit = descriptor.unit;
+      if (const std::string c = ConstraintText(descriptor); !c.empty()) info.constraint = c;
       return;
     }
-    declared.push_back(
-        {std::string(param), std::string(type), std::move(value), std::move(source)});
+    declared.push_back({std::string(param), std::string(type), std::move(value), std::move(source),
+                        descriptor.description, descriptor.unit, ConstraintText(descriptor)});
+  }
+
+  // Checks `value` (from `source`) of `param` against `descriptor`; throws NodeError if outside.
+  template <class T>
+  void CheckDescriptor(std::string_view param, const T& value, const std::string& source,
+                       const ParamDescriptor& descriptor) const {
+    const bool ranged = descriptor.min.has_value() || descriptor.max.has_value();
+    constexpr bool kNumber =
+        std::is_same_v<T, int> || std::is_same_v<T, int64_t> || std::is_same_v<T, double>;
+    constexpr bool kNumbers =
+        std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<int64_t>>;
+    constexpr bool kString = std::is_same_v<T, std::string>;
+    constexpr bool kStrings = std::is_same_v<T, std::vector<std::string>>;
+    PROBELESS_DEMAND(!ranged || kNumber || kNumbers, "a parameter range is for numbers only");
+    PROBELESS_DEMAND(descriptor.choices.empty() || kString || kStrings,
+                     "parameter choices are for strings only");
+    const auto shown = [&] {
+      const std::string text = internal::FormatValue(ToParamValue(value));
+      return "parameter '" + std::string(param) + "' = " + (kString ? "\"" + text + "\"" : text) +
+             " (from " + source + ")";
+    };
+    if constexpr (kNumber || kNumbers) {
+      if (!ranged) return;
+      const auto inside = [&](double v) {
+        if (std::isnan(v)) return false;
+        if (descriptor.min) {
+          if (descriptor.min_exclusive ? !(v > *descriptor.min) : !(v >= *descriptor.min)) {
+            return false;
+          }
+        }
+        return !descriptor.max || v <= *descriptor.max;
+      };
+      bool ok = true;
+      if constexpr (kNumber) {
+        ok = inside(static_cast<double>(value));
+      } else {
+        for (const auto v : value) ok = ok && inside(static_cast<double>(v));
+      }
+      if (!ok) {
+        Fail(shown() + " is out of range: expected " + (kNumbers ? "every element " : "a value ") +
+             "in " + RangeText(descriptor) +
+             (descriptor.unit.empty() ? std::string() : " " + descriptor.unit));
+      }
+    }
+    if constexpr (kString || kStrings) {
+      if (descriptor.choices.empty()) return;
+      const auto allowed = [&](const std::string& v) {
+        return std::find(descriptor.choices.begin(), descriptor.choices.end(), v) !=
+               descriptor.choices.end();
+      };
+      bool ok = true;
+      if constexpr (kString) {
+        ok = allowed(value);
+      } else {
+        for (const std::string& v : value) ok = ok && allowed(v);
+      }
+      if (!ok) {
+        Fail(shown() + (kStrings ? " has an element that is" : " is") + " not one of " +
+             JoinChoices(descriptor.choices));
+      }
+    }
   }
 
   template <class T>
@@ -358,9 +476,10 @@ Node::Node(const std::vector<std::string>& argv, std::string_view default_name,
     std::string ignored;
     std::string value;
     impl_->Lookup(std::string_view("log_level"), value, ignored);
-    impl_->Declare("log_level", "string", value, it->second.source);
+    impl_->Declare("log_level", "string", value, it->second.source, kLogLevelDescriptor);
   } else {
-    impl_->Declare("log_level", "string", std::string(LogLevelName(log_level())), "default");
+    impl_->Declare("log_level", "string", std::string(LogLevelName(log_level())), "default",
+                   kLogLevelDescriptor);
   }
 }
 
@@ -392,6 +511,7 @@ namespace {
 // The run statistics of Node::Spin (top of node.h) into <dir>/<node>.json.
 void WriteRunStats(const Node& node, int64_t created_mono_ns, const char* dir,
                    const std::vector<InputTiming>& inputs, const std::vector<HandlerCall>& calls) {
+  const std::map<std::string, uint64_t> rejected = node.RejectedSamples();
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   auto seconds = [](const timeval& t) { return static_cast<double>(t.tv_sec) + t.tv_usec * 1e-6; };
@@ -426,6 +546,7 @@ void WriteRunStats(const Node& node, int64_t created_mono_ns, const char* dir,
         << "\", \"handled\": " << input.durations_ns.size()
         << ", \"received\": " << (counters == received_dropped.end() ? 0 : counters->second.first)
         << ", \"dropped\": " << input.subscriber->dropped()
+        << ", \"rejected\": " << (rejected.count(topic) ? rejected.at(topic) : 0)
         << ", \"handler_ms\": {\"p50\": " << Quantile(input.durations_ns, 0.5)
         << ", \"p99\": " << Quantile(input.durations_ns, 0.99)
         << ", \"max\": " << Quantile(input.durations_ns, 1.0)
@@ -453,15 +574,32 @@ void WriteRunStats(const Node& node, int64_t created_mono_ns, const char* dir,
 }  // namespace
 
 void Node::Spin(const std::vector<Handler>& handlers) {
+  CheckParamOverrides();
   const char* stats_dir = std::getenv("PROBELESS_NODE_STATS");
   const bool timed = stats_dir != nullptr && *stats_dir != '\0';
   std::vector<InputTiming> inputs(handlers.size());
   std::vector<HandlerCall> calls;
   std::vector<Handler> acking;
   acking.reserve(handlers.size());
+  std::vector<uint64_t> handled(handlers.size(), 0);
   for (size_t i = 0; i < handlers.size(); ++i) {
     bus::Subscriber* subscriber = handlers[i].subscriber;
-    auto on_sample = handlers[i].on_sample;
+    // The bad-input rule (node.h): an InputError of the sample rejects that sample only.
+    auto on_sample = [this, subscriber, inner = handlers[i].on_sample,
+                      count = &handled[i]](bus::Sample&& sample) {
+      ++*count;
+      try {
+        inner(std::move(sample));
+      } catch (const NodeError&) {
+        throw;  // configuration, not this sample
+      } catch (const UsageError&) {
+        throw;  // configuration, not this sample
+      } catch (const bus::BusError&) {
+        throw;  // the bus itself, not this sample
+      } catch (const InputError& e) {
+        RejectSample(subscriber->topic(), e.what());
+      }
+    };
     inputs[i].subscriber = subscriber;
     if (!timed) {
       acking.push_back({subscriber, [this, subscriber, on_sample](bus::Sample&& sample) {
@@ -484,7 +622,35 @@ void Node::Spin(const std::vector<Handler>& handlers) {
          }});
   }
   node::Spin(acking);
+  // Per topic (two handlers may share one): rejected of handled.
+  std::map<std::string, uint64_t> handled_per_topic;
+  for (size_t i = 0; i < handlers.size(); ++i) {
+    handled_per_topic[handlers[i].subscriber->topic()] += handled[i];
+  }
+  for (const auto& [topic, count] : RejectedSamples()) {
+    auto it = handled_per_topic.find(topic);
+    Warn() << topic << ": rejected " << count << " of "
+           << (it == handled_per_topic.end() ? count : it->second) << " samples";
+  }
   if (timed) WriteRunStats(*this, impl_->created_mono_ns, stats_dir, inputs, calls);
+}
+
+void Node::RejectSample(const std::string& topic, std::string_view what) {
+  uint64_t count = 0;
+  {
+    std::lock_guard lock(impl_->mutex);
+    count = ++impl_->rejected[topic];
+  }
+  if (count > kLoggedRejections && count % kRejectionLogPeriod != 0) return;
+  if (what.starts_with(topic) && what.substr(topic.size()).starts_with(": ")) {
+    what.remove_prefix(topic.size() + 2);  // the line names the topic already
+  }
+  if (count <= kLoggedRejections) {
+    Error() << "rejected a sample of " << topic << ": " << msgs::PrintableText(what);
+  } else {
+    Error() << "rejected a sample of " << topic << ": " << msgs::PrintableText(what) << " ("
+            << count << " rejected so far; only every " << kRejectionLogPeriod << "th is logged)";
+  }
 }
 
 const std::string& Node::name() const { return impl_->name; }
@@ -494,7 +660,7 @@ const std::string& Node::program() const { return impl_->program; }
 const std::vector<std::string>& Node::args() const { return impl_->own_args; }
 
 template <ParamType T>
-T Node::Param(std::string_view name, T default_value) {
+T Node::Param(std::string_view name, T default_value, const ParamDescriptor& descriptor) {
   std::lock_guard lock(impl_->mutex);
   T value{};
   std::string source;
@@ -502,12 +668,14 @@ T Node::Param(std::string_view name, T default_value) {
     value = std::move(default_value);
     source = "default";
   }
-  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source);
+  impl_->CheckDescriptor(name, value, source, descriptor);
+  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source,
+                 descriptor);
   return value;
 }
 
 template <ParamType T>
-T Node::RequireParam(std::string_view name) {
+T Node::RequireParam(std::string_view name, const ParamDescriptor& descriptor) {
   std::lock_guard lock(impl_->mutex);
   T value{};
   std::string source;
@@ -516,13 +684,15 @@ T Node::RequireParam(std::string_view name) {
                 std::string(ExpectedTypeName<T>()) +
                 ") is not set (give it with -p or a params file)");
   }
-  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source);
+  impl_->CheckDescriptor(name, value, source, descriptor);
+  impl_->Declare(name, ExpectedTypeName<T>(), internal::FormatValue(ToParamValue(value)), source,
+                 descriptor);
   return value;
 }
 
-#define PROBELESS_NODE_INSTANTIATE(T)             \
-  template T Node::Param<T>(std::string_view, T); \
-  template T Node::RequireParam<T>(std::string_view);
+#define PROBELESS_NODE_INSTANTIATE(T)                                     \
+  template T Node::Param<T>(std::string_view, T, const ParamDescriptor&); \
+  template T Node::RequireParam<T>(std::string_view, const ParamDescriptor&);
 PROBELESS_NODE_INSTANTIATE(bool)
 PROBELESS_NODE_INSTANTIATE(int64_t)
 PROBELESS_NODE_INSTANTIATE(int)
@@ -550,6 +720,31 @@ std::vector<std::string> Node::UnusedParamOverrides() const {
     if (!entry.used) unused.push_back(name);
   }
   return unused;
+}
+
+void Node::CheckParamOverrides() const {
+  std::lock_guard lock(impl_->mutex);
+  for (const auto& [param, entry] : impl_->overrides) {
+    if (entry.used || entry.wildcard) continue;
+    // The nearest declared name within a third of its length: a typo, not another parameter.
+    std::string nearest;
+    size_t best = param.size() / 3 + 1;
+    for (const ParamInfo& info : impl_->declared) {
+      const size_t d = EditDistance(param, info.name);
+      if (d < best) {
+        best = d;
+        nearest = info.name;
+      }
+    }
+    impl_->Fail("unknown parameter '" + param + "' (from " + entry.source + ")" +
+                (nearest.empty() ? std::string("; this node declares no parameter of that name")
+                                 : "; did you mean '" + nearest + "'?"));
+  }
+}
+
+std::map<std::string, uint64_t> Node::RejectedSamples() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->rejected;
 }
 
 std::string Node::ResolveTopicName(std::string_view name) const {

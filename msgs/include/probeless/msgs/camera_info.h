@@ -90,7 +90,7 @@ struct CameraInfo {
   // Throws MessageError unless the model is known, distortion_count matches it, width/height and
   // fx/fy are positive and depth_scale is not negative.
   void Validate() const {
-    const std::string name = std::string(kTypeName) + " '" + std::string(header.FrameId()) + "'";
+    const std::string name = std::string(kTypeName) + " '" + PrintableText(header.FrameId()) + "'";
     if (DistortionModelName(distortion_model) == "invalid") {
       throw MessageError(name + ": invalid distortion model " +
                          std::to_string(static_cast<uint32_t>(distortion_model)));

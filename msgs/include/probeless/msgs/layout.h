@@ -267,6 +267,25 @@ std::string_view FixedString(const char (&field)[N]) {
   return {field, length};
 }
 
+// `text` (a string field of a received message: any bytes) fit for a one-line message: printable
+// ASCII as is, every other byte, and the backslash, as \xNN.
+inline std::string PrintableText(std::string_view text) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte < 0x7f && c != '\\') {
+      out += c;
+    } else {
+      out += "\\x";
+      out += kHex[byte >> 4];
+      out += kHex[byte & 15];
+    }
+  }
+  return out;
+}
+
 // Stores `value` NUL-terminated (and NUL-padded) in `field`. Throws MessageError naming
 // `field_name` if value has N or more characters or contains a NUL.
 template <size_t N>

@@ -27,19 +27,23 @@
 // Node::Spin
 //   times every handler call and, when it returns, writes <dir>/<fqn without the leading '/',
 //   '/' -> '.'>.json: pid, wall and CPU seconds (getrusage: all threads) since the Node was made,
-//   per input topic the samples handled, the bus's received/dropped counters and the handler time
+//   per input topic the samples handled, the bus's received/dropped counters, the samples
+//   rejected as bad input (Spin below) and the handler time
 //   (p50/p99/max ms, total s), per output topic the messages published (this process's
 //   publishers, read from the bus registry), and every handler call as [start CLOCK_MONOTONIC ns,
 //   duration ns, input index] (the first 100000). Unset (the default): nothing is timed or written.
 //
-// Errors: bad arguments, params files, parameter types and topic names throw NodeError with one
-// line naming the node (once known) and the problem.
+// Errors: bad arguments, params files, parameter types, values outside a parameter's declared
+// range or choices, unknown parameter overrides (CheckParamOverrides) and bad topic names throw
+// NodeError with one line naming the node (once known) and the problem.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -64,6 +68,11 @@ enum class LogLevel : int { kDebug = 0, kInfo = 1, kWarn = 2, kError = 3 };
 std::string_view LogLevelName(LogLevel level);
 // Parses "debug", "info", "warn"/"warning", "error" (any case). Throws NodeError otherwise.
 LogLevel ParseLogLevel(std::string_view text);
+
+// Rejections per input topic that Node::Spin logs one by one; after them it logs every
+// kRejectionLogPeriod-th only.
+inline constexpr uint64_t kLoggedRejections = 10;
+inline constexpr uint64_t kRejectionLogPeriod = 100;
 
 // Longest time Spin() waits on its WaitSet before re-checking ok().
 inline constexpr std::chrono::milliseconds kShutdownPollPeriod{20};
@@ -119,12 +128,29 @@ concept ParamType = std::is_same_v<T, bool> || std::is_same_v<T, int64_t> ||
     std::is_same_v<T, std::vector<double>> || std::is_same_v<T, std::vector<int64_t>> ||
     std::is_same_v<T, std::vector<std::string>>;
 
+// What a parameter means and which values it may take (ROS 2's ParameterDescriptor). The
+// effective value (the override, else the default) is checked when the parameter is read: a
+// number, or each element of a number array, against [min, max] (min exclusive with
+// `min_exclusive`); a string, or each element of a string array, against `choices`. A range on a
+// non-number or choices on a non-string parameter is a bug (PROBELESS_DEMAND).
+struct ParamDescriptor {
+  std::string description;           // one line, e.g. "spherical-harmonic bands of the estimate"
+  std::string unit;                  // e.g. "m", "ms", "Hz", "deg"; empty: unitless
+  std::optional<double> min;         // no lower bound when empty
+  std::optional<double> max;         // no upper bound when empty
+  bool min_exclusive = false;        // value > min instead of value >= min
+  std::vector<std::string> choices;  // empty: any string
+};
+
 // A declared parameter, for introspection.
 struct ParamInfo {
   std::string name;
-  std::string type;    // "bool", "integer", "double", "string", "double_array", ...
-  std::string value;   // e.g. "30", "0.5", "rgb8", "[1, 2]", "[\"a\", \"b\"]"
-  std::string source;  // "default", "-p" or "params file '<path>'"
+  std::string type;         // "bool", "integer", "double", "string", "double_array", ...
+  std::string value;        // e.g. "30", "0.5", "rgb8", "[1, 2]", "[\"a\", \"b\"]"
+  std::string source;       // "default", "-p" or "params file '<path>'"
+  std::string description;  // ParamDescriptor::description; empty when declared without one
+  std::string unit;         // ParamDescriptor::unit
+  std::string constraint;   // e.g. "[1, 8]", "(0, inf)", "one of gbuffer|depth"; empty: any value
 };
 
 class Node;
@@ -180,19 +206,37 @@ class Node {
   // integer is accepted for double, integers for double arrays, an empty list for any array) or
   // the parameter was declared before with another type.
   template <ParamType T>
-  T Param(std::string_view name, T default_value);
+  T Param(std::string_view name, T default_value) {
+    return Param<T>(name, std::move(default_value), ParamDescriptor{});
+  }
   std::string Param(std::string_view name, const char* default_value) {
-    return Param<std::string>(name, std::string(default_value));
+    return Param<std::string>(name, std::string(default_value), ParamDescriptor{});
+  }
+  // Like Param, and checks the effective value against `descriptor` (see ParamDescriptor): throws
+  // NodeError "parameter 'bands' = 12 (from -p) is out of range: expected a value in [1, 8]" or
+  // "... is not one of gbuffer|depth". The descriptor is kept for DeclaredParams.
+  template <ParamType T>
+  T Param(std::string_view name, T default_value, const ParamDescriptor& descriptor);
+  std::string Param(std::string_view name, const char* default_value,
+                    const ParamDescriptor& descriptor) {
+    return Param<std::string>(name, std::string(default_value), descriptor);
   }
   // Like Param, but throws NodeError if the parameter has no override.
   template <ParamType T>
-  T RequireParam(std::string_view name);
+  T RequireParam(std::string_view name, const ParamDescriptor& descriptor = {});
   // Whether `name` has an override (-p or params file).
   bool HasParamOverride(std::string_view name) const;
   // Parameters declared so far, in declaration order.
   std::vector<ParamInfo> DeclaredParams() const;
   // Overrides that no Param/RequireParam call has read yet (typos in launch files), sorted.
   std::vector<std::string> UnusedParamOverrides() const;
+  // Throws NodeError for the first (sorted) override that no Param/RequireParam call has read,
+  // naming its source and the nearest declared name: "unknown parameter 'bandz' (from -p); did
+  // you mean 'bands'?". Overrides that came only from wildcard params-file entries ("/**",
+  // "/ns/*") are shared by many nodes and are not checked. Spin calls it before it starts, so a
+  // node declares all of its parameters before spinning; a node without Spin calls it once its
+  // parameters are read.
+  void CheckParamOverrides() const;
 
   // Fully qualified, remapped topic name for `name` (see top of file). Throws NodeError if the
   // name or the result is invalid (the result is also checked by bus::ValidateTopicName).
@@ -245,8 +289,23 @@ class Node {
   void Ack(const bus::Subscriber& from, const bus::MessageInfo& input);
   // node::Spin(handlers), acknowledging every sample once its handler has returned; with
   // $PROBELESS_NODE_STATS set, also timing each handler and writing the run statistics when it
-  // returns (top of file).
+  // returns (top of file). Calls CheckParamOverrides first.
+  // One rule for bad input in every C++ node: a handler that throws InputError for a sample (a
+  // malformed message, a frame its library refuses) rejects that sample only: RejectSample below,
+  // the sample acknowledged, and Spin goes on; when it returns it logs "<topic>: rejected N of M
+  // samples" per topic that rejected any. NodeError and UsageError (configuration), bus::BusError
+  // (the bus itself) and every other exception end Spin as before, so a handler throws NodeError
+  // for a problem that no later sample can fix (an output file that cannot be written).
   void Spin(const std::vector<Handler>& handlers);
+  // Counts one rejected sample of `topic` (resolved) and logs "rejected a sample of <topic>:
+  // <what>" (a leading "<topic>: " of `what` dropped, control bytes escaped) for the first
+  // kLoggedRejections of the topic, then for every kRejectionLogPeriod-th with the count so far.
+  // Spin calls it; a handler that takes samples of another subscriber itself (TryTake) calls it for
+  // those. Thread-safe.
+  void RejectSample(const std::string& topic, std::string_view what);
+  // Samples rejected so far (RejectSample), per resolved input topic (topics without rejections
+  // are absent).
+  std::map<std::string, uint64_t> RejectedSamples() const;
 
   // Shortcuts for the process-wide functions above.
   bool ok() const { return node::ok(); }
@@ -261,25 +320,31 @@ class Node {
   std::unique_ptr<Impl> impl_;
 };
 
-extern template bool Node::Param<bool>(std::string_view, bool);
-extern template int64_t Node::Param<int64_t>(std::string_view, int64_t);
-extern template int Node::Param<int>(std::string_view, int);
-extern template double Node::Param<double>(std::string_view, double);
-extern template std::string Node::Param<std::string>(std::string_view, std::string);
+extern template bool Node::Param<bool>(std::string_view, bool, const ParamDescriptor&);
+extern template int64_t Node::Param<int64_t>(std::string_view, int64_t, const ParamDescriptor&);
+extern template int Node::Param<int>(std::string_view, int, const ParamDescriptor&);
+extern template double Node::Param<double>(std::string_view, double, const ParamDescriptor&);
+extern template std::string Node::Param<std::string>(std::string_view, std::string,
+                                                     const ParamDescriptor&);
 extern template std::vector<double> Node::Param<std::vector<double>>(std::string_view,
-                                                                     std::vector<double>);
+                                                                     std::vector<double>,
+                                                                     const ParamDescriptor&);
 extern template std::vector<int64_t> Node::Param<std::vector<int64_t>>(std::string_view,
-                                                                       std::vector<int64_t>);
+                                                                       std::vector<int64_t>,
+                                                                       const ParamDescriptor&);
 extern template std::vector<std::string> Node::Param<std::vector<std::string>>(
-    std::string_view, std::vector<std::string>);
-extern template bool Node::RequireParam<bool>(std::string_view);
-extern template int64_t Node::RequireParam<int64_t>(std::string_view);
-extern template int Node::RequireParam<int>(std::string_view);
-extern template double Node::RequireParam<double>(std::string_view);
-extern template std::string Node::RequireParam<std::string>(std::string_view);
-extern template std::vector<double> Node::RequireParam<std::vector<double>>(std::string_view);
-extern template std::vector<int64_t> Node::RequireParam<std::vector<int64_t>>(std::string_view);
+    std::string_view, std::vector<std::string>, const ParamDescriptor&);
+extern template bool Node::RequireParam<bool>(std::string_view, const ParamDescriptor&);
+extern template int64_t Node::RequireParam<int64_t>(std::string_view, const ParamDescriptor&);
+extern template int Node::RequireParam<int>(std::string_view, const ParamDescriptor&);
+extern template double Node::RequireParam<double>(std::string_view, const ParamDescriptor&);
+extern template std::string Node::RequireParam<std::string>(std::string_view,
+                                                            const ParamDescriptor&);
+extern template std::vector<double> Node::RequireParam<std::vector<double>>(std::string_view,
+                                                                            const ParamDescriptor&);
+extern template std::vector<int64_t> Node::RequireParam<std::vector<int64_t>>(
+    std::string_view, const ParamDescriptor&);
 extern template std::vector<std::string> Node::RequireParam<std::vector<std::string>>(
-    std::string_view);
+    std::string_view, const ParamDescriptor&);
 
 }  // namespace probeless::node
