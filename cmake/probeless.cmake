@@ -93,6 +93,9 @@ function(probeless_add_fuzzer)
     set_target_properties(${F_NAME}_replay PROPERTIES RUNTIME_OUTPUT_DIRECTORY
                                                       ${CMAKE_BINARY_DIR}/tests)
     set(_command ${F_NAME}_replay ${F_CORPUS})
+    if("sanitize" IN_LIST F_LABELS)
+      add_dependencies(sanitize_targets ${F_NAME}_replay)  # its seeds replayed under ASan/UBSan
+    endif()
   else()
     return()
   endif()
