@@ -46,6 +46,7 @@
 #include <vector>
 
 #include "outputs.h"
+#include "params.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 #include "probeless/node/stamp_cache.h"
@@ -72,63 +73,16 @@ struct PendingImage {
 
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "fusion");
-  recon::FusionOptions options;
-  options.volume.size_m = static_cast<float>(node.Param("volume_size", 2.0));
-  options.volume.resolution = node.Param("volume_resolution", 256);
-  const std::vector<double> origin =
-      node.Param("volume_origin", std::vector<double>{-1, -1.2, 0.5});
-  if (origin.size() != 3) throw node::NodeError("fusion: param volume_origin needs 3 values");
-  options.volume.origin = {static_cast<float>(origin[0]), static_cast<float>(origin[1]),
-                           static_cast<float>(origin[2])};
-  options.volume.truncation_m = static_cast<float>(node.Param("truncation", 0.03));
-  options.volume.max_weight = node.Param("max_weight", 64);
-  options.threads = node.Param("threads", 2);
-  options.preprocess.depth_min_m = static_cast<float>(node.Param("depth_min", 0.3));
-  options.preprocess.depth_max_m = static_cast<float>(node.Param("depth_max", 4.0));
-  options.merge_enabled = node.Param("merge", true);
-  options.merge.merge_k = node.Param("merge_k", 20);
-  options.merge.merge_lambda_i = static_cast<float>(node.Param("lambda_i", 7.0));
-  options.merge.lambda_d_m = static_cast<float>(node.Param("lambda_d", 0.05));
-  options.merge.smooth_k = node.Param("smooth_k", 8);
-  options.merge.smooth_lambda_i = static_cast<float>(node.Param("smooth_lambda_i", 7.0));
-  options.merge.denoise_k = node.Param("denoise_k", 2);
-  options.merge.lambda_d_sigmas =
-      static_cast<float>(node.Param("lambda_d_sigmas", double{options.merge.lambda_d_sigmas}));
-  {
-    const std::vector<double> noise = node.Param(
-        "depth_noise", std::vector<double>{options.merge.noise_a_m, options.merge.noise_b_per_m,
-                                           options.merge.noise_z0_m});
-    if (noise.size() != 3) throw node::NodeError("fusion: param depth_noise needs 3 values");
-    options.merge.noise_a_m = static_cast<float>(noise[0]);
-    options.merge.noise_b_per_m = static_cast<float>(noise[1]);
-    options.merge.noise_z0_m = static_cast<float>(noise[2]);
-  }
-  options.merge.noise_quantisation_per_m = static_cast<float>(
-      node.Param("depth_quantisation", double{options.merge.noise_quantisation_per_m}));
-  options.icp.iterations.clear();
-  for (int64_t n : node.Param("icp_iterations", std::vector<int64_t>{4, 5, 10})) {
-    options.icp.iterations.push_back(static_cast<int>(n));
-  }
-  {
-    const bool volume_default = options.normal_source == recon::NormalSource::kVolume;
-    const std::string normals = node.Param("normals", volume_default ? "volume" : "depth",
-                                           {.choices = {"depth", "volume"}});
-    options.normal_source =
-        normals == "volume" ? recon::NormalSource::kVolume : recon::NormalSource::kDepth;
-  }
-  options.volume_normal_max_gap_m =
-      static_cast<float>(node.Param("normal_gap", double{options.volume_normal_max_gap_m}));
-  options.volume_normal_step_voxels = static_cast<float>(
-      node.Param("normal_gradient_step", double{options.volume_normal_step_voxels}));
-  const std::string mesh_out = node.Param("mesh_out", "");
-  const std::string world_frame = node.Param("world_frame", "world");
-  const bool publish_aux = node.Param("publish_aux", false);
-  const int aux_pixels = node.Param(
-      "aux_pixels", 128, {.unit = "px", .min = 1.0, .max = double{msgs::kMaxAuxiliaryViewPixels}});
-  const bool aux_light = node.Param("aux_light", false);
-  const double fail_on_lost_ratio = node.Param("fail_on_lost_ratio", -1.0);
-  const std::string checkpoint_path = node.Param("checkpoint", "");
-  const int checkpoint_frames = node.Param("checkpoint_frames", 30, {.min = 1.0});
+  const fusion::FusionParams params = fusion::ReadParams(node);
+  const recon::FusionOptions& options = params.options;
+  const std::string& mesh_out = params.mesh_out;
+  const std::string& world_frame = params.world_frame;
+  const bool publish_aux = params.publish_aux;
+  const int aux_pixels = params.aux_pixels;
+  const bool aux_light = params.aux_light;
+  const double fail_on_lost_ratio = params.fail_on_lost_ratio;
+  const std::string& checkpoint_path = params.checkpoint_path;
+  const int checkpoint_frames = params.checkpoint_frames;
   recon::FusionPipeline pipeline(options);
   std::optional<recon::CheckpointWriter> checkpoint;
   if (!checkpoint_path.empty()) {

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # docs/nodes.md documents every node: each directory nodes/<n>/ (with a main.cpp) has a "## <n>"
-# section, and every parameter its main.cpp reads by a literal name (node.Param("name", ...),
-# node.Param<T>("name", ...), HasParamOverride("name"), Optional<T>(node, "name", ...)) has a table
+# section, and every parameter its sources (nodes/<n>/*.cpp) read by a literal name
+# (node.Param("name", ...), node.Param<T>("name", ...), HasParamOverride("name"),
+# Optional<T>(node, "name", ...)) has a table
 # row "| `name` |" in that section. Nodes that run capture::RunCaptureNode must also find the
 # params read by common/capture/src/capture_node.cpp in the "### Common capture params" section.
 # Rows naming a param the code does not read are reported as warnings (stale documentation).
@@ -11,9 +12,9 @@
 #                                           removed from it
 set -euo pipefail
 
-# Literal parameter names read in the C++ file $1, one per line.
+# Literal parameter names read in the C++ files "$@", one per line.
 params_read() {
-  tr '\n' ' ' < "$1" |
+  cat "$@" | tr '\n' ' ' |
     grep -oE '(Param(<[^()"]*>)?|HasParamOverride|Optional<[^()"]*>)\( *(node, *)?"[A-Za-z0-9_.]+"' |
     sed -E 's/.*"([A-Za-z0-9_.]+)"$/\1/' | sort -u
 }
@@ -48,10 +49,11 @@ check() {
       continue
     fi
     text=$(section "$doc" "## $node")
-    for p in $(params_read "$main"); do
+    local srcs=("$dir"*.cpp)  # main.cpp and the node's other sources (its params reading)
+    for p in $(params_read "${srcs[@]}"); do
       params=$((params + 1))
       if ! documented "$text" "$p"; then
-        echo "FAILED: node '$node': param '$p' (read in nodes/$node/main.cpp) is not documented in" \
+        echo "FAILED: node '$node': param '$p' (read in nodes/$node/) is not documented in" \
           "its section of docs/nodes.md"
         failures=$((failures + 1))
       fi
@@ -68,21 +70,21 @@ check() {
     fi
     # Rows of params the code does not read: stale. A name may be a prefix literal ("image_")
     # plus a literal read with it, or (capture nodes) come from capture_node.cpp.
-    local sources=("$main") prefixes
+    local sources=("${srcs[@]}") prefixes
     if grep -q 'RunCaptureNode' "$main"; then
       sources+=("$root/common/capture/src/capture_node.cpp")
     fi
-    prefixes=$(grep -ohE '"[a-z0-9]+_"' "$main" | tr -d '"' | sort -u || true)
+    prefixes=$(grep -ohE '"[a-z0-9]+_"' "${srcs[@]}" | tr -d '"' | sort -u || true)
     for p in $(section "$doc" "## $node" | awk '/^### /{exit} {print}' |
       grep -oE '^\| `[A-Za-z0-9_.]+` \| (string|int|double|bool)' | sed -E 's/^\| `([^`]+)`.*/\1/'); do
       local found=0
       if grep -qF "\"$p\"" "${sources[@]}"; then found=1; fi
       for prefix in $prefixes; do
-        if [[ $p == "$prefix"* ]] && grep -qF "\"${p#"$prefix"}\"" "$main"; then found=1; fi
+        if [[ $p == "$prefix"* ]] && grep -qF "\"${p#"$prefix"}\"" "${srcs[@]}"; then found=1; fi
       done
       if [ "$found" -eq 0 ]; then
         echo "warning: node '$node': documented param '$p' is not read by that name in" \
-          "nodes/$node/main.cpp"
+          "nodes/$node/"
       fi
     done
   done
@@ -104,6 +106,7 @@ const int gap = node.Param(
     "gap", 2);
 const std::string mode = node.Param("mode", "a", {.choices = {"a", "b"}});
 CPP
+  echo 'o.depth = node.Param("depth", 3);' > "$tmp/nodes/alpha/params.cpp"
   cat > "$tmp/nodes/beta/main.cpp" <<'CPP'
 if (node.HasParamOverride("gain")) o.gain = node.Param("gain", 1.0);
 c.focus = Optional<int64_t>(node, "focus", 0);
@@ -119,6 +122,7 @@ CPP
 | `names` | string list | `[]` | | |
 | `gap` | int | 2 | px | |
 | `mode` | string | `a` | | a or b |
+| `depth` | int | 3 | | read in the node's params.cpp |
 
 ## beta
 
@@ -143,6 +147,8 @@ MD
   expect_failure "a missing row" "node 'alpha': param 'gap'"
   grep -vF '| `mode` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
   expect_failure "a missing row of a declared param" "node 'alpha': param 'mode'"
+  grep -vF '| `depth` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
+  expect_failure "a missing row of a param read outside main.cpp" "node 'alpha': param 'depth'"
   grep -vF '| `frame_id` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"
   expect_failure "a missing common capture row" "node 'beta': common capture param 'frame_id'"
   grep -vF '| `focus` |' "$tmp/complete.md" > "$tmp/docs/nodes.md"

@@ -181,7 +181,9 @@ TEST(RenderNodeTest, FaceModelUnitsAreRefused) {
 TEST(RenderNodeTest, BadParamsAndMissingMeshFail) {
   std::string out;
   EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p mode:=orbit", &out), 2);
-  EXPECT_NE(out.find("param mode: expected face or scene, got 'orbit'"), std::string::npos) << out;
+  EXPECT_NE(out.find("parameter 'mode' = \"orbit\" (from -p) is not one of face|scene"),
+            std::string::npos)
+      << out;
   out.clear();
   EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p objects:=[/nonexistent/cup.obj]", &out),
             2);
@@ -194,12 +196,13 @@ TEST(RenderNodeTest, BadParamsAndMissingMeshFail) {
 TEST(RenderNodeTest, DifferentialParamsAreChecked) {
   std::string out;
   EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p shadow_source:=plane", &out), 2);
-  EXPECT_NE(out.find("param shadow_source: expected gbuffer or mesh, got 'plane'"),
+  EXPECT_NE(out.find("parameter 'shadow_source' = \"plane\" (from -p) is not one of gbuffer|mesh"),
             std::string::npos)
       << out;
   out.clear();
   EXPECT_EQ(RunCommand(Bin("renderer") + " --ros-args -p differential_tone:=gamma", &out), 2);
-  EXPECT_NE(out.find("param differential_tone: expected fixed, key or ratio, got 'gamma'"),
+  EXPECT_NE(out.find("parameter 'differential_tone' = \"gamma\" (from -p) is not one of "
+                     "fixed|key|ratio"),
             std::string::npos)
       << out;
   out.clear();
