@@ -45,6 +45,17 @@ bus::SubscriberOptions Depth(uint32_t depth) {
   return options;
 }
 
+// Publishes `count` default Pose messages on `pub`; returns their bus sequences.
+std::vector<uint64_t> PublishPoses(bus::Publisher& pub, int count) {
+  std::vector<uint64_t> sequences;
+  for (int i = 0; i < count; ++i) {
+    bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
+    msgs::WriteMessage<msgs::Pose>(loan.data());
+    sequences.push_back(pub.Publish(std::move(loan)));
+  }
+  return sequences;
+}
+
 // This user's segments of the test's domain currently in /dev/shm.
 std::vector<std::string> Segments() {
   const std::string prefix =
@@ -244,12 +255,7 @@ TEST_F(NodeBusTest, SpinAcknowledgesEveryInputAfterItsHandler) {
     bus::Subscriber acks("/lab/worker/ack", msgs::TopicTypeOf<msgs::Ack>(), Depth(16));
     bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
     bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
-    std::vector<uint64_t> sent;
-    for (int i = 0; i < 3; ++i) {
-      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
-      msgs::WriteMessage<msgs::Pose>(loan.data());
-      sent.push_back(pub.Publish(std::move(loan)));
-    }
+    const std::vector<uint64_t> sent = PublishPoses(pub, 3);
     int handled = 0;
     bool acked_before_handler_returned = false;
     node.Spin({{&input, [&](bus::Sample&&) {
@@ -283,11 +289,7 @@ TEST_F(NodeBusTest, SpinRejectsABadSampleWithOneLineAndGoesOn) {
     bus::Subscriber acks("/lab/worker/ack", msgs::TopicTypeOf<msgs::Ack>(), Depth(16));
     bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
     bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
-    for (int i = 0; i < 3; ++i) {
-      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
-      msgs::WriteMessage<msgs::Pose>(loan.data());
-      pub.Publish(std::move(loan));
-    }
+    PublishPoses(pub, 3);
     int handled = 0;
     node.Spin({{&input, [&](bus::Sample&&) {
                   ++handled;
@@ -353,33 +355,26 @@ TEST_F(NodeBusTest, SpinPassesConfigurationErrorsOnAndRefusesUnknownOverrides) {
     Node node(Argv({}), "worker");
     bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
     bus::Publisher pub("/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
-    bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
-    msgs::WriteMessage<msgs::Pose>(loan.data());
-    pub.Publish(std::move(loan));
-    const auto publish = [&] {
-      bus::Loan more = pub.Borrow(sizeof(msgs::Pose));
-      msgs::WriteMessage<msgs::Pose>(more.data());
-      pub.Publish(std::move(more));
-    };
+    PublishPoses(pub, 1);
     try {
       node.Spin({{&input, [](bus::Sample&&) { throw NodeError("bad config"); }}});
       return 40;
     } catch (const NodeError& e) {
       if (std::string(e.what()) != "bad config") return 41;
     }
-    publish();
+    PublishPoses(pub, 1);
     try {
       node.Spin({{&input, [](bus::Sample&&) { throw UsageError("bad usage"); }}});
       return 45;
     } catch (const UsageError&) {
     }
-    publish();
+    PublishPoses(pub, 1);
     try {
       node.Spin({{&input, [](bus::Sample&&) { throw bus::BusError("bus broke"); }}});
       return 46;
     } catch (const bus::BusError&) {
     }
-    publish();
+    PublishPoses(pub, 1);
     try {
       node.Spin({{&input, [](bus::Sample&&) { throw std::runtime_error("a bug"); }}});
       return 47;
@@ -418,11 +413,7 @@ TEST_F(NodeBusTest, SpinWritesRunStatsWhenAsked) {
     bus::Subscriber input = node.CreateSubscriber<msgs::Pose>("pose", Depth(8));
     bus::Publisher out = node.CreatePublisher<msgs::Pose>("out");
     bus::Publisher pub("/lab/pose", msgs::TopicTypeOf<msgs::Pose>(), {.max_message_bytes = 1024});
-    for (int i = 0; i < 3; ++i) {
-      bus::Loan loan = pub.Borrow(sizeof(msgs::Pose));
-      msgs::WriteMessage<msgs::Pose>(loan.data());
-      pub.Publish(std::move(loan));
-    }
+    PublishPoses(pub, 3);
     int handled = 0;
     node.Spin({{&input, [&](bus::Sample&&) {
                   std::this_thread::sleep_for(2ms);
