@@ -81,6 +81,21 @@ TEST(FuseLightsTest, ConfidenceScale) {
   EXPECT_TRUE(std::isinf(ExpectedErrorFromConfidence(0)));
 }
 
+// The expected light under the direction uncertainty: band l scaled by exp(-l(l+1) sigma^2 / 2),
+// sigma = blur e / sqrt(2 ln 2); no known direction (c = 0) keeps band 0 only.
+TEST(FuseLightsTest, UncertaintyBandFactorIsTheGaussianBlurOfTheExpectedError) {
+  const double sigma = 10.0 * std::numbers::pi / 180 / std::sqrt(2 * std::log(2.0));  // c = 0.5
+  EXPECT_NEAR(UncertaintyBandFactor(0.5, 1, 1), std::exp(-sigma * sigma), 1e-12);
+  EXPECT_NEAR(UncertaintyBandFactor(0.5, 1, 3), std::exp(-6 * sigma * sigma), 1e-12);
+  EXPECT_NEAR(UncertaintyBandFactor(0.5, 2, 1), std::exp(-4 * sigma * sigma), 1e-12);
+  EXPECT_EQ(UncertaintyBandFactor(0.5, 1, 0), 1);
+  EXPECT_EQ(UncertaintyBandFactor(0.5, 0, 2), 1);
+  EXPECT_EQ(UncertaintyBandFactor(1.0, 1, 2), 1);  // certain: nothing blurred
+  EXPECT_EQ(UncertaintyBandFactor(0.0, 1, 1), 0);
+  EXPECT_EQ(UncertaintyBandFactor(0.0, 1, 0), 1);
+  EXPECT_LT(UncertaintyBandFactor(0.05, 1, 2), UncertaintyBandFactor(0.05, 1, 1));
+}
+
 TEST(FuseLightsTest, InverseVarianceWeights) {
   // c = 0.75 (weight 3) and 0.25 (weight 1/3), directions 10 deg apart (consistent).
   const double t = 10 * std::numbers::pi / 180;

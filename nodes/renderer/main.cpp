@@ -54,6 +54,7 @@
 
 #include "outputs.h"
 #include "params.h"
+#include "probeless/light/fusion.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/node.h"
 #include "probeless/prt/demo_objects.h"
@@ -170,6 +171,14 @@ int Run(int argc, char** argv) {
                     : render::DefaultIntrinsics(width, height);
     in.camera_rgb = camera_rgb;
     in.light = light;
+    if (params.object_uncertainty_blur > 0) {
+      for (int k = 1; k < in.light.bands * in.light.bands; ++k) {
+        const int band = static_cast<int>(std::sqrt(static_cast<double>(k)));
+        const auto f = static_cast<float>(light::UncertaintyBandFactor(
+            light_msg.confidence, params.object_uncertainty_blur, band));
+        for (float& c : in.light.coefficients[k]) c *= f;
+      }
+    }
     in.face_valid = have_face && face.face_detected;
     if (in.face_valid) in.face_to_camera = render::TransformFromMsg(face.head_pose);
     in.camera_to_world = camera_to_world;

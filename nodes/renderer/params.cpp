@@ -79,6 +79,7 @@ RendererParams ReadParams(node::Node& node) {
   p.video_fps = node.Param("video_fps", 30.0, {.unit = "Hz", .min = 0.0, .min_exclusive = true});
   p.png_dir = node.Param("png_dir", "");
   p.max_frames = node.Param<int64_t>("max_frames", 0, {.min = 0.0});
+  p.object_uncertainty_blur = node.Param("object_uncertainty_blur", 0.0, {.min = 0.0});
   return p;
 }
 

@@ -26,6 +26,10 @@ struct RendererParams {
   double video_fps = 30;                     // Hz
   std::string png_dir;                       // PNG frames; empty: none
   int64_t max_frames = 0;                    // exit after this many composites; 0: never
+  // The virtual objects shaded with the light's expected value under its own direction
+  // uncertainty (light::UncertaintyBandFactor of the message's confidence, this blur); the real
+  // pixels' differential keeps the light as published. 0: off.
+  double object_uncertainty_blur = 0;
 };
 
 // Reads every renderer param of `node` (defaults: docs/nodes.md). Throws node::NodeError for a

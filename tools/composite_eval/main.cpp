@@ -45,7 +45,8 @@ namespace fs = std::filesystem;
 
 constexpr const char* kUsage =
     "usage: composite_eval --scenes DIR [--only NAME,...] [--mode gbuffer|depth] --json OUT "
-    "[--sheets DIR] [--light-param NAME:=VALUE]... [--no-focus] [--keep-work]";
+    "[--sheets DIR] [--light-param NAME:=VALUE]... [--render-param NAME:=VALUE]... [--no-focus] "
+    "[--keep-work]";
 constexpr int kProxyStride = 6;  // px between the scene proxy's vertices (2.5-4 cm at 2-3 m)
 
 using node::UsageError;
@@ -58,7 +59,8 @@ void OnSignal(int) { composite_eval::RequestStop(); }
 struct Options {
   std::string scenes, json, sheets, mode = "gbuffer";
   std::vector<std::string> only;
-  std::vector<std::string> light_params;  // scene_light param overrides (NAME:=VALUE)
+  std::vector<std::string> light_params;   // scene_light param overrides (NAME:=VALUE)
+  std::vector<std::string> render_params;  // our renderer's param overrides (NAME:=VALUE)
   // scene_light's focus: the objects' centre, as a live graph passes its renderer's placement.
   bool focus = true;
   bool keep_work = false;  // keep the work folder (logs of every node, the MCAP sources)
@@ -93,17 +95,23 @@ std::optional<Options> ParseOptions(int argc, char** argv) {
       o.mode);
   flags.Add("--json", &o.json, "OUT", "the figures");
   flags.Add("--sheets", &o.sheets, "DIR", "labelled contact sheets per scene");
-  flags.AddCallback(
-      "--light-param", "NAME:=VALUE", "a scene_light param override (repeatable)",
-      [&](const std::string& rule) {
-        const size_t sep = rule.find(":=");
-        if (sep == std::string::npos || sep == 0 ||
-            rule.find_first_of(" '\"\\") != std::string::npos) {
-          throw UsageError("--light-param: expected NAME:=VALUE without spaces or quotes, got '" +
-                           rule + "'");
-        }
-        o.light_params.push_back(rule);
-      });
+  // NAME:=VALUE rules for a node's --ros-args -p section (no spaces or quotes: one shell word).
+  const auto param_rule = [](const char* flag, std::vector<std::string>* into) {
+    return [flag, into](const std::string& rule) {
+      const size_t sep = rule.find(":=");
+      if (sep == std::string::npos || sep == 0 ||
+          rule.find_first_of(" '\"\\") != std::string::npos) {
+        throw UsageError(std::string(flag) +
+                         ": expected NAME:=VALUE without spaces or quotes, got '" + rule + "'");
+      }
+      into->push_back(rule);
+    };
+  };
+  flags.AddCallback("--light-param", "NAME:=VALUE", "a scene_light param override (repeatable)",
+                    param_rule("--light-param", &o.light_params));
+  flags.AddCallback("--render-param", "NAME:=VALUE",
+                    "a param override of our renderer (not the oracle's or baseline's; repeatable)",
+                    param_rule("--render-param", &o.render_params));
   flags.AddSwitch(
       "--no-focus", [&] { o.focus = false; },
       "scene_light without the objects' centre as its focus");
@@ -444,6 +452,11 @@ SceneResult EvaluateScene(const Scene& scene, size_t k, size_t n, const Options&
     std::string light_args = "light_args:=--ros-args";
     for (const std::string& rule : light_params) light_args += " -p " + rule;
     graph.launch_args.push_back(light_args + " --");
+  }
+  if (!options.render_params.empty()) {
+    std::string render_args = "render_args:=--ros-args";
+    for (const std::string& rule : options.render_params) render_args += " -p " + rule;
+    graph.launch_args.push_back(render_args + " --");
   }
   ::setenv("PROBELESS_LOG_DIR", (dir / "log").string().c_str(), 1);
   std::cerr << tag << ": running the graph (fusion volume " << Fixed(volume.size) << " m)\n";

@@ -38,6 +38,14 @@ double ExpectedErrorFromConfidence(double confidence) {
   return kConfidenceReferenceErrorDeg * std::sqrt((1 - c) / c);
 }
 
+double UncertaintyBandFactor(double confidence, double blur, int band) {
+  if (band <= 0 || !(blur > 0)) return 1;
+  const double e = ExpectedErrorFromConfidence(confidence) * std::numbers::pi / 180;
+  if (std::isinf(e)) return 0;
+  const double sigma = blur * e / std::sqrt(2 * std::log(2.0));
+  return std::exp(-0.5 * band * (band + 1) * sigma * sigma);
+}
+
 ConfidenceCalibration::ConfidenceCalibration(std::span<const double> knots) {
   if (knots.size() % 2 != 0) {
     throw FusionError("confidence calibration: " + std::to_string(knots.size()) +

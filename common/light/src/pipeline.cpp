@@ -401,11 +401,9 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   if (r.light.valid) {
     r.light.confidence = static_cast<float>(s.confidence.Apply(r.light.confidence));
     if (o.uncertainty_blur > 0 && !s.confidence.identity()) {
-      const double e = ExpectedErrorFromConfidence(r.light.confidence) * std::numbers::pi / 180;
-      const double sigma = o.uncertainty_blur * e / std::sqrt(2 * std::log(2.0));
       for (size_t k = 1; k < r.light.coefficients.size(); ++k) {
         const int l = static_cast<int>(std::sqrt(static_cast<double>(k)));  // band of k
-        r.light.coefficients[k] *= std::exp(-0.5 * l * (l + 1) * sigma * sigma);
+        r.light.coefficients[k] *= UncertaintyBandFactor(r.light.confidence, o.uncertainty_blur, l);
       }
     }
   }

@@ -30,6 +30,12 @@ inline constexpr double kConfidenceReferenceErrorDeg = 10;
 double ConfidenceFromExpectedError(double error_deg);
 // c in [0, 1] -> e in degrees (c = 0 -> +inf).
 double ExpectedErrorFromConfidence(double confidence);
+// The factor of SH band `band` (>= 0) in the expected light of an estimate of confidence c under
+// its own direction uncertainty: the SH convolution with a spherical Gaussian (Ramamoorthi &
+// Hanrahan 2001), exp(-l(l+1) sigma^2 / 2) with sigma = blur x e / sqrt(2 ln 2), e =
+// ExpectedErrorFromConfidence(c) in radians (a Rayleigh-distributed angle whose median is e).
+// Band 0 is 1; blur 0 gives 1; c = 0 (no known direction) gives 0 for every band >= 1.
+double UncertaintyBandFactor(double confidence, double blur, int band);
 
 // A producer's raw confidence mapped onto the scale above: knots (raw confidence, expected error
 // in degrees), raw ascending in [0, 1], errors > 0; piecewise linear in the error between knots,
