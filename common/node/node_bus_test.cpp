@@ -85,6 +85,9 @@ const bus::TopicSnapshot* FindTopic(const std::vector<bus::TopicSnapshot>& topic
   }
   return nullptr;
 }
+// A snapshot's element must not outlive it: FindTopic(bus::ListTopics(), ...) would dangle.
+const bus::TopicSnapshot* FindTopic(std::vector<bus::TopicSnapshot>&& topics,
+                                    const std::string& name) = delete;
 
 TEST_F(NodeBusTest, PublisherAndSubscriberTalkWithTypeAndNodeNames) {
   Node talker(Argv({"--ros-args", "-r", "__ns:=/demo"}), "talker");
@@ -146,7 +149,8 @@ TEST_F(NodeBusTest, GrowingPublisherIsMadeByTheFirstMessageAndGrowsForALargerOne
   Node listener(Argv({}), "listener");
   GrowingPublisher<msgs::Image> pub(talker, "image", {.slot_count = 4});
   EXPECT_FALSE(pub.created());
-  EXPECT_EQ(FindTopic(bus::ListTopics(), "/camera/image"), nullptr);  // nothing before a message
+  const std::vector<bus::TopicSnapshot> before = bus::ListTopics();
+  EXPECT_EQ(FindTopic(before, "/camera/image"), nullptr);  // nothing before a message
   bus::Subscriber sub = listener.CreateSubscriber<msgs::Image>("camera/image", Depth(8));
   PublishImage(pub, 32, 24, 1);
   EXPECT_TRUE(pub.created());
@@ -160,7 +164,8 @@ TEST_F(NodeBusTest, GrowingPublisherIsMadeByTheFirstMessageAndGrowsForALargerOne
   }
   const std::vector<std::pair<uint32_t, uint8_t>> expected = {{32, 1}, {16, 2}, {64, 3}, {64, 4}};
   EXPECT_EQ(seen, expected);
-  const bus::TopicSnapshot* topic = FindTopic(bus::ListTopics(), "/camera/image");
+  const std::vector<bus::TopicSnapshot> topics = bus::ListTopics();
+  const bus::TopicSnapshot* topic = FindTopic(topics, "/camera/image");
   ASSERT_NE(topic, nullptr);
   ASSERT_EQ(topic->publishers.size(), 1u);  // the old one is gone
 }
