@@ -9,6 +9,7 @@
 
 namespace probeless::fusion {
 
+// Every fusion param, as the node's setup uses them (the defaults are ReadParams's).
 struct FusionParams {
   recon::FusionOptions options;    // the pipeline's (volume, merge, ICP, normals)
   std::string mesh_out;            // PLY written at exit; empty: none

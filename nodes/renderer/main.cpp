@@ -31,7 +31,9 @@
 // ssdo_threads, differential_step, differential_smooth, differential_tone (ratio | fixed | key),
 // differential_key, indirect, sun_shadow (with differential_tone ratio: the crisp cast shadow of
 // the light's directional part, render::DifferentialOptions::sun_shadow),
-// object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there).
+// object_pixel ([] or [u, v]: the objects rest on the reconstructed surface seen there),
+// virtual_occlusion, virtual_bounce, object_uncertainty_blur (0: off; > 0: the objects shaded
+// with the light blurred by its confidence's expected error). Read in params.cpp.
 //
 // Click to place (backend window, scene mode): a left click on the composite in the viewer window
 // places the objects like object_pixel at the clicked pixel (render::Renderer::TakeClicks converts
@@ -171,6 +173,7 @@ int Run(int argc, char** argv) {
                     : render::DefaultIntrinsics(width, height);
     in.camera_rgb = camera_rgb;
     in.light = light;
+    // The objects' light as its expected value under the direction uncertainty (params.h).
     if (params.object_uncertainty_blur > 0) {
       for (int k = 1; k < in.light.bands * in.light.bands; ++k) {
         const int band = static_cast<int>(std::sqrt(static_cast<double>(k)));

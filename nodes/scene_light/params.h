@@ -1,5 +1,5 @@
-// scene_light's params (docs/nodes.md, "scene_light") as the pipeline's options: the one place
-// the node reads them, so main.cpp is the graph plumbing only.
+// scene_light's params (docs/nodes.md, "scene_light") as the pipeline's options; main.cpp reads
+// only the node's own (mode, publish_transfer, use_aux, aux_wait_ms, focus).
 #pragma once
 
 #include <string>

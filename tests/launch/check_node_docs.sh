@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # docs/nodes.md documents every node: each directory nodes/<n>/ (with a main.cpp) has a "## <n>"
-# section, and every parameter its sources (nodes/<n>/*.cpp) read by a literal name
-# (node.Param("name", ...), node.Param<T>("name", ...), HasParamOverride("name"),
+# section, and every parameter its sources (nodes/<n>/*.cpp but *_test.cpp) read by a literal
+# name (node.Param("name", ...), node.Param<T>("name", ...), HasParamOverride("name"),
 # Optional<T>(node, "name", ...)) has a table
 # row "| `name` |" in that section. Nodes that run capture::RunCaptureNode must also find the
 # params read by common/capture/src/capture_node.cpp in the "### Common capture params" section.
@@ -49,7 +49,8 @@ check() {
       continue
     fi
     text=$(section "$doc" "## $node")
-    local srcs=("$dir"*.cpp)  # main.cpp and the node's other sources (its params reading)
+    local srcs=()  # main.cpp and the node's other sources (its params reading), not its tests
+    for f in "$dir"*.cpp; do [[ $f == *_test.cpp ]] || srcs+=("$f"); done
     for p in $(params_read "${srcs[@]}"); do
       params=$((params + 1))
       if ! documented "$text" "$p"; then
