@@ -39,8 +39,11 @@ function(probeless_add_test)
   endif()
   set_tests_properties(${T_NAME} PROPERTIES TIMEOUT ${T_TIMEOUT} LABELS "${T_LABELS}"
     ENVIRONMENT "PROBELESS_DOMAIN=ctest_${T_NAME}")
-  if("sanitize" IN_LIST T_LABELS OR "tsan" IN_LIST T_LABELS)
+  if("sanitize" IN_LIST T_LABELS)
     add_dependencies(sanitize_targets ${T_NAME})
+  endif()
+  if("tsan" IN_LIST T_LABELS)
+    add_dependencies(tsan_targets ${T_NAME})
   endif()
 endfunction()
 
@@ -52,14 +55,17 @@ function(probeless_add_tool)
   target_link_libraries(${T_NAME} PRIVATE ${T_LIBS})
 endfunction()
 
-# Aggregate targets for tools/test: what the sanitizer builds and the fuzz build compile.
+# Aggregate targets for tools/test: what the address/undefined sanitizer build (tests labelled
+# "sanitize"), the thread sanitizer build (tests labelled "tsan") and the fuzz build compile.
 add_custom_target(sanitize_targets)
+add_custom_target(tsan_targets)
 add_custom_target(fuzz_targets)
 
-# probeless_sanitize_depends(<targets...>): build these in the sanitizer builds too (tests labelled
-# "sanitize" or "tsan" are added automatically; add the executables such tests run).
+# probeless_sanitize_depends(<targets...>): build these in both sanitizer builds too (tests
+# labelled "sanitize" or "tsan" are added automatically; add the executables such tests run).
 function(probeless_sanitize_depends)
   add_dependencies(sanitize_targets ${ARGN})
+  add_dependencies(tsan_targets ${ARGN})
 endfunction()
 
 # The fuzz build instruments every library, not only the fuzz targets: libFuzzer's coverage
