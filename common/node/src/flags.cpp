@@ -5,26 +5,16 @@
 #include <stdexcept>
 #include <utility>
 
+#include "text.h"
+
 namespace probeless::node {
 namespace {
 
 constexpr size_t kHelpColumn = 30;  // flags longer than this put their help on the next line
 constexpr std::string_view kHelpFlags = "-h, --help";
 
-std::string FormatReal(double value) {
-  char text[32];
-  std::snprintf(text, sizeof text, "%g", value);
-  return text;
-}
-
-std::string Join(const std::vector<std::string>& items, std::string_view separator) {
-  std::string out;
-  for (const auto& item : items) {
-    if (!out.empty()) out += separator;
-    out += item;
-  }
-  return out;
-}
+using internal::FormatReal;
+using internal::Join;
 
 // One "  <left>  <help>" line of the usage, the help aligned at kHelpColumn.
 void AppendLine(std::string& out, const std::string& left, const std::string& help) {

@@ -22,6 +22,7 @@
 #include "params.h"
 #include "probeless/msgs/replay.h"
 #include "probeless/node/main.h"
+#include "text.h"
 
 namespace probeless::node {
 
@@ -133,30 +134,17 @@ std::string StatsFileName(std::string fqn) {
   return (fqn.empty() ? std::string("root") : fqn) + ".json";
 }
 
-std::string FormatBound(double v) {
-  if (std::isinf(v)) return "inf";
-  std::ostringstream out;
-  out << v;
-  return out.str();
-}
-
 // "[1, 8]", "(0, inf)", "[-inf, 3]".
 std::string RangeText(const ParamDescriptor& d) {
   return std::string(d.min && !d.min_exclusive ? "[" : "(") +
-         (d.min ? FormatBound(*d.min) : "-inf") + ", " + (d.max ? FormatBound(*d.max) : "inf") +
-         (d.max ? "]" : ")");
-}
-
-std::string JoinChoices(const std::vector<std::string>& choices) {
-  std::string out;
-  for (const std::string& c : choices) out += (out.empty() ? "" : "|") + c;
-  return out;
+         (d.min ? internal::FormatReal(*d.min) : "-inf") + ", " +
+         (d.max ? internal::FormatReal(*d.max) : "inf") + (d.max ? "]" : ")");
 }
 
 // ParamInfo::constraint of a descriptor.
 std::string ConstraintText(const ParamDescriptor& d) {
   if (d.min || d.max) return RangeText(d);
-  if (!d.choices.empty()) return "one of " + JoinChoices(d.choices);
+  if (!d.choices.empty()) return "one of " + internal::Join(d.choices, "|");
   return {};
 }
 
@@ -406,7 +394,7 @@ struct Node::Impl {
       }
       if (!ok) {
         Fail(shown() + (kStrings ? " has an element that is" : " is") + " not one of " +
-             JoinChoices(descriptor.choices));
+             internal::Join(descriptor.choices, "|"));
       }
     }
   }
