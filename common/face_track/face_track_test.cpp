@@ -18,6 +18,7 @@
 #include "probeless/face_track/head_model.h"
 #include "probeless/face_track/light_output.h"
 #include "probeless/face_track/sampling.h"
+#include "probeless/msgs/image.h"
 #include "probeless/sh/sh.h"
 #include "probeless/testing/expect.h"
 
@@ -182,6 +183,31 @@ TEST(Sampling, ValidityCases) {
   // Frontal normals point towards the camera (-z).
   s = sampler.Sample(view, f.track);
   EXPECT_LT(s.normals[3 * 7 + 2], -0.8);
+}
+
+// A bus image as the tracker sees it: the encodings it reads, the row stride of the message, and
+// one error line for the others or for a payload too small.
+TEST(Sampling, ViewOfImageMapsEncodingsAndRefusesTheRest) {
+  msgs::Image image;
+  image.Init(5, 3, msgs::Encoding::kRgb8);
+  image.step = 16;  // padded rows: the view keeps the message's stride
+  std::vector<std::byte> payload(image.step * image.height);
+  ImageView view = ViewOfImage(image, payload);
+  EXPECT_EQ(view.format, PixelFormat::kRgb);
+  EXPECT_EQ(view.width, 5);
+  EXPECT_EQ(view.height, 3);
+  EXPECT_EQ(view.stride, 16u);
+  EXPECT_EQ(static_cast<const void*>(view.data), static_cast<const void*>(payload.data()));
+  image.Init(5, 3, msgs::Encoding::kBgr8);
+  EXPECT_EQ(ViewOfImage(image, payload).format, PixelFormat::kBgr);
+  image.Init(5, 3, msgs::Encoding::kMono8);
+  EXPECT_EQ(ViewOfImage(image, payload).format, PixelFormat::kGray);
+  image.Init(5, 3, msgs::Encoding::kMono16);
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      ViewOfImage(image, payload), msgs::MessageError,
+      "face_tracker: image encoding mono16 not supported (expected rgb8, bgr8 or mono8)");
+  image.Init(5, 3, msgs::Encoding::kRgb8);
+  EXPECT_THROW(ViewOfImage(image, std::span(payload).first(10)), msgs::MessageError);
 }
 
 TEST(LightOutput, RotateSh9MatchesRotatedDirectionalLight) {

@@ -10,10 +10,12 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <thread>
 
+#include "probeless/node/data_file.h"
 #include "probeless/node/main.h"
 #include "probeless/testing/expect.h"
 
@@ -786,6 +788,31 @@ TEST(RunMainTest, ParseNumberOption) {
     PROBELESS_EXPECT_THROWS_MESSAGE(ParseNumberOption("--rate", bad), UsageError,
                                     std::string("--rate expects a number, got '") + bad + "'");
   }
+}
+
+// The shipped data are found from any working directory; what is not there is left as given, so
+// that the loader's error names the user's path.
+TEST(DataFileTest, ResolvesShippedDataFromAnyDirectoryAndLeavesTheRest) {
+  namespace fs = std::filesystem;
+  const fs::path before = fs::current_path();
+  const fs::path dir =
+      fs::temp_directory_path() / ("probeless_data_file_" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  fs::current_path(dir);
+  const std::string shipped = "data/face_light/default_model.txt";
+  const std::string resolved = ResolveDataFile(shipped);
+  std::ofstream(dir / "local.txt") << "x";
+  const std::string local = ResolveDataFile("local.txt");
+  const std::string missing = ResolveDataFile("data/no_such_model.txt");
+  fs::current_path(before);
+  fs::remove_all(dir);
+  EXPECT_TRUE(fs::path(resolved).is_absolute()) << resolved;
+  EXPECT_TRUE(fs::exists(resolved)) << resolved;
+  EXPECT_TRUE(resolved.ends_with("/" + shipped)) << resolved;
+  EXPECT_EQ(local, "local.txt");  // the working directory comes first
+  EXPECT_EQ(missing, "data/no_such_model.txt");
+  EXPECT_EQ(ResolveDataFile(""), "");
+  EXPECT_EQ(ResolveDataFile("/no/such/file"), "/no/such/file");
 }
 
 }  // namespace

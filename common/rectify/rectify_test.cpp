@@ -260,6 +260,32 @@ TEST(Rectify, UndistortedCamerasPassThroughAndPublishPlumbBobZeros) {
   }
 }
 
+// Without any calibration the node copies frames through CopyImage: packed, byte-identical, the
+// header kept, and the same one-line errors as Rectify.
+TEST(Rectify, CopyImagePacksRowsKeepsTheHeaderAndNamesTheTopic) {
+  msgs::Image in;
+  in.Init(64, 8, msgs::Encoding::kMono16);
+  in.step = 144;
+  in.header.stamp_ns = 1234;
+  std::vector<std::byte> pixels(in.PayloadBytes());
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = std::byte(static_cast<uint8_t>(i * 7));
+  TestImage out(64, 8, msgs::Encoding::kMono16);
+  CopyImage(in, pixels, out.header, out.pixels, "/camera/depth");
+  EXPECT_EQ(out.header.step, 128u);
+  EXPECT_EQ(out.header.header.stamp_ns, 1234);
+  for (uint32_t y = 0; y < 8; ++y) {
+    EXPECT_EQ(std::memcmp(out.pixels.data() + y * 128, pixels.data() + y * 144, 128), 0);
+  }
+  std::vector<std::byte> tiny(100);
+  EXPECT_EQ(ThrownMessage<RectifyError>(
+                [&] { CopyImage(in, pixels, out.header, tiny, "/camera/depth"); }),
+            "/camera/depth: output buffer of 100 bytes, 1024 needed");
+  in.encoding = msgs::Encoding::kInvalid;
+  EXPECT_EQ(ThrownMessage<RectifyError>(
+                [&] { CopyImage(in, pixels, out.header, out.pixels, "/camera/depth"); }),
+            "/camera/depth: invalid image encoding 0");
+}
+
 TEST(Rectify, RectifiedCameraInfoIsTheRosProjection) {
   msgs::CameraInfo info = test::Freiburg1Info();
   info.header.SetFrameId("kinect_rgb");

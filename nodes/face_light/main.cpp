@@ -23,7 +23,6 @@
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or model (one line on stderr), 1 otherwise.
 #include "probeless/node/main.h"
 
-#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
@@ -36,6 +35,7 @@
 #include "probeless/face_track/light_output.h"
 #include "probeless/light/fusion.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/data_file.h"
 #include "probeless/node/node.h"
 
 namespace {
@@ -44,20 +44,10 @@ using namespace probeless;
 namespace ft = probeless::face_track;
 namespace fl = probeless::face_light;
 
-std::string ResolveModel(const std::string& path) {
-  namespace fs = std::filesystem;
-  if (path.empty() || fs::path(path).is_absolute() || fs::exists(path)) return path;
-  for (const std::string base : {PROBELESS_SOURCE_TREE, PROBELESS_INSTALL_DATA}) {
-    const fs::path candidate = fs::path(base) / path;
-    if (fs::exists(candidate)) return candidate.string();
-  }
-  return path;
-}
-
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "face_light");
   const std::string model_path =
-      ResolveModel(node.Param("model", "data/face_light/default_model.txt"));
+      node::ResolveDataFile(node.Param("model", "data/face_light/default_model.txt"));
   const std::string mode = node.Param("mode", "rgb", {.choices = {"rgb", "gray"}});
   fl::EstimatorOptions eo;
   eo.back_prior = node.Param("back_prior", 0.1);

@@ -19,7 +19,6 @@
 
 #include <algorithm>
 #include <cstring>
-#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -28,22 +27,14 @@
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/sampling.h"
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/data_file.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 
 namespace {
 
 using namespace probeless;
 namespace ft = probeless::face_track;
-
-std::string ResolveModel(const std::string& path) {
-  namespace fs = std::filesystem;
-  if (path.empty() || fs::path(path).is_absolute() || fs::exists(path)) return path;
-  for (const std::string base : {PROBELESS_SOURCE_TREE, PROBELESS_INSTALL_DATA}) {
-    const fs::path candidate = fs::path(base) / path;
-    if (fs::exists(candidate)) return candidate.string();
-  }
-  return path;  // LoadModel names it in its error
-}
 
 int Run(int argc, char** argv) {
   node::Node node(argc, argv, "face_tracker");
@@ -69,15 +60,11 @@ int Run(int argc, char** argv) {
       node.Param("neighbour_threshold", sampler_options.neighbour_threshold);
   sampler_options.four_point_frame =
       node.Param("four_point_frame", sampler_options.four_point_frame);
-  const std::string image_transfer = node.Param("image_transfer", "linear");
-  if (image_transfer != "linear" && image_transfer != "srgb") {
-    throw node::UsageError("face_tracker: image_transfer must be linear or srgb, got '" +
-                           image_transfer + "'");
-  }
-  sampler_options.srgb_input = image_transfer == "srgb";
+  sampler_options.srgb_input =
+      node.Param("image_transfer", "linear", {.choices = {"linear", "srgb"}}) == "srgb";
   const bool debug_image = node.Param("publish_debug_image", false);
   const std::string model_path =
-      ResolveModel(node.Param("sample_model", "data/face_light/default_model.txt"));
+      node::ResolveDataFile(node.Param("sample_model", "data/face_light/default_model.txt"));
 
   const face_light::FaceLightModel model = face_light::LoadModel(model_path);
   ft::FaceTracker tracker(options);
@@ -88,8 +75,7 @@ int Run(int argc, char** argv) {
   bus::Subscriber infos =
       node.CreateSubscriber<msgs::CameraInfo>("camera_info", {.queue_depth = 4});
   bus::Publisher observations = node.CreatePublisher<msgs::FaceObservation>("face/observation");
-  std::optional<bus::Publisher> debug;
-  size_t debug_capacity = 0;
+  node::GrowingPublisher<msgs::Image> debug(node, "face/debug_image");
   std::optional<ft::Intrinsics> intrinsics;
   std::vector<uint8_t> drawn;
   int64_t frames = 0, found = 0;
@@ -113,24 +99,7 @@ int Run(int argc, char** argv) {
   };
   auto on_image = [&](bus::Sample&& sample) {
     const auto image = msgs::ReadMessage<msgs::Image>(sample.data());
-    image->Validate(image.payload.size());
-    ft::ImageView view{reinterpret_cast<const uint8_t*>(image.payload.data()),
-                       static_cast<int>(image->width), static_cast<int>(image->height), image->step,
-                       ft::PixelFormat::kGray};
-    switch (image->encoding) {
-      case msgs::Encoding::kMono8:
-        break;
-      case msgs::Encoding::kRgb8:
-        view.format = ft::PixelFormat::kRgb;
-        break;
-      case msgs::Encoding::kBgr8:
-        view.format = ft::PixelFormat::kBgr;
-        break;
-      default:
-        throw msgs::MessageError("face_tracker: image encoding " +
-                                 std::string(msgs::EncodingName(image->encoding)) +
-                                 " not supported (expected rgb8, bgr8 or mono8)");
-    }
+    const ft::ImageView view = ft::ViewOfImage(*image, image.payload);
     const ft::Intrinsics k =
         intrinsics ? *intrinsics : ft::Intrinsics::Guess(view.width, view.height);
     const ft::FaceTrack track = tracker.Track(view, k);
@@ -148,18 +117,13 @@ int Run(int argc, char** argv) {
     if (debug_image && track.found) {
       const size_t bytes =
           msgs::Image::MessageBytesFor(image->width, image->height, msgs::Encoding::kRgb8);
-      if (!debug || bytes > debug_capacity) {
-        debug.reset();
-        debug = node.CreatePublisher<msgs::Image>("face/debug_image", {.max_message_bytes = bytes});
-        debug_capacity = bytes;
-      }
       ft::DrawDebugImage(view, track, *samples, k, drawn);
-      bus::Loan dl = debug->Borrow(bytes);
+      bus::Loan dl = debug.Borrow(bytes);
       auto di = msgs::WriteMessage<msgs::Image>(dl.data());
       di->header = image->header;
       di->Init(image->width, image->height, msgs::Encoding::kRgb8);
       std::memcpy(di.payload.data(), drawn.data(), drawn.size());
-      debug->Publish(std::move(dl));
+      debug.Publish(std::move(dl));
     }
   };
   node.Spin({{&infos, on_info}, {&images, on_image}});

@@ -17,11 +17,11 @@
 #include "probeless/node/main.h"
 
 #include <chrono>
-#include <cstring>
 #include <optional>
 #include <string>
 
 #include "probeless/msgs/msgs.h"
+#include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 #include "probeless/rectify/rectify.h"
 
@@ -29,12 +29,9 @@ namespace {
 
 using namespace probeless;
 
-// One rectified output stream: its publisher, created on the first frame (the slot size follows
-// the image size) and recreated when a larger image comes.
+// One rectified output stream: its publisher follows the image size (node::GrowingPublisher).
 struct Output {
-  std::string topic;
-  std::optional<bus::Publisher> publisher;
-  size_t capacity = 0;
+  node::GrowingPublisher<msgs::Image> publisher;
   uint64_t published = 0;
 };
 
@@ -60,7 +57,7 @@ int Run(int argc, char** argv) {
   bus::Subscriber info_sub =
       node.CreateSubscriber<msgs::CameraInfo>("camera_info", {.queue_depth = 4});
   bus::Publisher info_pub = node.CreatePublisher<msgs::CameraInfo>("camera_info_rect");
-  Output image_out{"image_rect"}, depth_out{"depth_rect"};
+  Output image_out{{node, "image_rect"}}, depth_out{{node, "depth_rect"}};
 
   std::optional<rectify::Rectifier> rectifier;
   std::optional<bus::Sample> waiting_image, waiting_depth;
@@ -76,27 +73,15 @@ int Run(int argc, char** argv) {
                                   std::to_string(static_cast<uint32_t>(in->encoding)));
     }
     const size_t bytes = msgs::Image::MessageBytesFor(in->width, in->height, in->encoding);
-    if (!out.publisher || bytes > out.capacity) {
-      out.publisher.reset();
-      out.publisher.emplace(
-          node.CreatePublisher<msgs::Image>(out.topic, {.max_message_bytes = bytes}));
-      out.capacity = bytes;
-    }
     const auto t0 = std::chrono::steady_clock::now();
-    bus::Loan loan = out.publisher->Borrow(bytes);
+    bus::Loan loan = out.publisher.Borrow(bytes);
     msgs::WriteView<msgs::Image> view = msgs::WriteMessage<msgs::Image>(loan.data());
     if (rectifier) {
       rectifier->Rectify(*in, in.payload, *view, view.payload, in_topic);
     } else {
-      in->Validate(in.payload.size());
-      view->Init(in->width, in->height, in->encoding);
-      view->header = in->header;
-      for (uint32_t y = 0; y < in->height; ++y) {
-        std::memcpy(view.payload.data() + static_cast<size_t>(y) * view->step,
-                    in.payload.data() + static_cast<size_t>(y) * in->step, view->step);
-      }
+      rectify::CopyImage(*in, in.payload, *view, view.payload, in_topic);
     }
-    out.publisher->Publish(std::move(loan));
+    out.publisher.Publish(std::move(loan));
     total_ms +=
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     ++timed;

@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "probeless/msgs/face_observation.h"
+#include "probeless/msgs/image.h"
 
 namespace probeless::face_track {
 
@@ -212,6 +213,27 @@ FaceSamples FaceSampler::Sample(const ImageView& image, const FaceTrack& track) 
   out.quality = static_cast<float>(static_cast<double>(out.ValidCount()) / n * fit_term *
                                    std::clamp(static_cast<double>(track.confidence), 0.0, 1.0));
   return out;
+}
+
+ImageView ViewOfImage(const msgs::Image& image, std::span<const std::byte> payload) {
+  image.Validate(payload.size());
+  ImageView view{reinterpret_cast<const uint8_t*>(payload.data()), static_cast<int>(image.width),
+                 static_cast<int>(image.height), image.step, PixelFormat::kGray};
+  switch (image.encoding) {
+    case msgs::Encoding::kMono8:
+      break;
+    case msgs::Encoding::kRgb8:
+      view.format = PixelFormat::kRgb;
+      break;
+    case msgs::Encoding::kBgr8:
+      view.format = PixelFormat::kBgr;
+      break;
+    default:
+      throw msgs::MessageError("face_tracker: image encoding " +
+                               std::string(msgs::EncodingName(image.encoding)) +
+                               " not supported (expected rgb8, bgr8 or mono8)");
+  }
+  return view;
 }
 
 void FillObservation(const FaceTrack& track, const FaceSamples* samples,

@@ -80,6 +80,33 @@ int CvType(msgs::Encoding e) {
 bool ValidDepth(uint16_t d) { return d != 0; }
 bool ValidDepth(float d) { return d > 0 && std::isfinite(d); }
 
+// `out` set up for a copy of `in` (header, size, encoding, packed step); the input and output
+// buffers checked. Throws RectifyError "<name>: ...".
+void PrepareOutput(const msgs::Image& in, std::span<const std::byte> in_pixels, msgs::Image& out,
+                   std::span<std::byte> out_pixels, const std::string& name) {
+  try {
+    in.Validate(in_pixels.size());
+  } catch (const std::exception& e) {
+    throw RectifyError(name + ": " + e.what());
+  }
+  const msgs::Header header = in.header;
+  out.Init(in.width, in.height, in.encoding);
+  out.header = header;
+  if (out_pixels.size() < out.PayloadBytes()) {
+    throw RectifyError(name + ": output buffer of " + std::to_string(out_pixels.size()) +
+                       " bytes, " + std::to_string(out.PayloadBytes()) + " needed");
+  }
+}
+
+// The rows of `in` into `out`'s packed rows (both prepared by PrepareOutput).
+void CopyRows(const msgs::Image& in, std::span<const std::byte> in_pixels, const msgs::Image& out,
+              std::span<std::byte> out_pixels) {
+  for (uint32_t y = 0; y < in.height; ++y) {
+    std::memcpy(out_pixels.data() + y * static_cast<size_t>(out.step),
+                in_pixels.data() + y * static_cast<size_t>(in.step), out.step);
+  }
+}
+
 }  // namespace
 
 bool HasDistortion(const msgs::CameraInfo& info) {
@@ -283,6 +310,17 @@ std::array<float, 2> Rectifier::SourcePixel(uint32_t x, uint32_t y) const {
           impl_->map_y.at<float>(static_cast<int>(y), static_cast<int>(x))};
 }
 
+void CopyImage(const msgs::Image& in, std::span<const std::byte> in_pixels, msgs::Image& out,
+               std::span<std::byte> out_pixels, std::string_view image_source) {
+  const std::string name = Str(image_source);
+  if (CvType(in.encoding) < 0) {
+    throw RectifyError(name + ": invalid image encoding " +
+                       std::to_string(static_cast<uint32_t>(in.encoding)));
+  }
+  PrepareOutput(in, in_pixels, out, out_pixels, name);
+  CopyRows(in, in_pixels, out, out_pixels);
+}
+
 void Rectifier::Rectify(const msgs::Image& in, std::span<const std::byte> in_pixels,
                         msgs::Image& out, std::span<std::byte> out_pixels,
                         std::string_view image_source) const {
@@ -298,24 +336,10 @@ void Rectifier::Rectify(const msgs::Image& in, std::span<const std::byte> in_pix
                        " does not match the calibration (" +
                        Size(m.calibration.width, m.calibration.height) + " from " + m.source + ")");
   }
-  try {
-    in.Validate(in_pixels.size());
-  } catch (const std::exception& e) {
-    throw RectifyError(name + ": " + e.what());
-  }
-  const msgs::Header header = in.header;
-  out.Init(in.width, in.height, in.encoding);
-  out.header = header;
-  if (out_pixels.size() < out.PayloadBytes()) {
-    throw RectifyError(name + ": output buffer of " + std::to_string(out_pixels.size()) +
-                       " bytes, " + std::to_string(out.PayloadBytes()) + " needed");
-  }
+  PrepareOutput(in, in_pixels, out, out_pixels, name);
   const size_t row = out.step;
   if (m.passthrough) {
-    for (uint32_t y = 0; y < in.height; ++y) {
-      std::memcpy(out_pixels.data() + y * row, in_pixels.data() + y * static_cast<size_t>(in.step),
-                  row);
-    }
+    CopyRows(in, in_pixels, out, out_pixels);
     return;
   }
   if (IsDepth(in.encoding)) {

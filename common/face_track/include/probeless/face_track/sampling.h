@@ -14,7 +14,8 @@
 
 namespace probeless::msgs {
 struct FaceObservation;
-}
+struct Image;
+}  // namespace probeless::msgs
 
 namespace probeless::face_track {
 
@@ -103,6 +104,12 @@ class FaceSampler {
   std::vector<std::array<double, 3>> normals_;
   std::vector<int> neighbours_;  // [i * options_.neighbours + k]
 };
+
+// The tracker's view of a bus image (msgs::Image with its payload; no copy: the view points into
+// `payload`, which must outlive it). rgb8, bgr8 and mono8 map to kRgb, kBgr and kGray. Throws
+// msgs::MessageError for a message whose payload does not hold it (Image::Validate) and
+// "face_tracker: image encoding <name> not supported (expected rgb8, bgr8 or mono8)".
+ImageView ViewOfImage(const msgs::Image& image, std::span<const std::byte> payload);
 
 // Fills a FaceObservation (header left to the caller): face_detected, 68 landmarks, head_pose,
 // samples (rgb, camera-frame normals, validity bits) and quality. A track that is not found

@@ -105,4 +105,11 @@ class Rectifier {
   std::unique_ptr<Impl> impl_;
 };
 
+// `in` copied unchanged into `out` (header, size and encoding copied, packed step) and
+// `out_pixels` (at least Image::PackedPayloadBytes bytes): the stream of a camera without any
+// calibration yet. Throws RectifyError "<image_source>: ..." for an invalid encoding or too small
+// buffers, as Rectifier::Rectify does.
+void CopyImage(const msgs::Image& in, std::span<const std::byte> in_pixels, msgs::Image& out,
+               std::span<std::byte> out_pixels, std::string_view image_source = "image");
+
 }  // namespace probeless::rectify
