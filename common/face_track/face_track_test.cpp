@@ -5,15 +5,19 @@
 // for a backlit face.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <numbers>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "probeless/face_light/estimator.h"
 #include "probeless/face_light/linear_light.h"
 #include "probeless/face_light/model.h"
+#include "probeless/face_track/face_light_pipeline.h"
 #include "probeless/face_track/face_tracker.h"
 #include "probeless/face_track/head_model.h"
 #include "probeless/face_track/light_output.h"
@@ -432,6 +436,63 @@ double Irradiance(const Sh9Rgb& c, const sh::Vec3& n) {
     e += sh::ClampedCosineCoefficient(l) * y[k] * (c[k][0] + c[k][1] + c[k][2]) / 3;
   }
   return e;
+}
+
+// The node's chain on one observation: no face -> nothing; a model mismatch -> one error; a face
+// under a known light -> a linear, confident light from that direction, rotated into the camera
+// frame by the head pose.
+TEST(FaceLightPipeline, PublishesTheLightOfAFaceInTheCameraFrame) {
+  const fl::FaceLightModel model =
+      fl::LoadModel(std::string(PROBELESS_SOURCE_DIR) + "/data/face_light/default_model.txt");
+  const std::array<double, 3> d{0.6, -0.3, -0.74};  // face frame, towards the light
+  const double norm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  const std::array<double, 3> u{d[0] / norm, d[1] / norm, d[2] / norm};
+  const fl::LinearLightConverter converter(model);
+  const std::vector<float> rgb = converter.Predict(u, {2.0, 1.8, 1.5}, {0.08, 0.08, 0.08});
+  msgs::FaceObservation obs;
+  obs.header.stamp_ns = 1'000'000'000;
+  obs.face_detected = 1;
+  obs.quality = 1;
+  obs.sample_count = static_cast<uint32_t>(rgb.size() / 3);
+  for (uint32_t i = 0; i < obs.sample_count; ++i) {
+    for (int c = 0; c < 3; ++c) obs.sample_rgb[i][c] = rgb[3 * i + c];
+    obs.sample_valid[i / 64] |= uint64_t{1} << (i % 64);
+  }
+  obs.head_pose.rotation = {1, 0, 0, 0};
+  auto angle = [](const float* a, const std::array<double, 3>& b) {
+    return std::acos(std::clamp(a[0] * b[0] + a[1] * b[1] + a[2] * b[2], -1.0, 1.0)) * 180 /
+           std::numbers::pi;
+  };
+
+  FaceLightPipeline frontal(model, {});
+  msgs::FaceObservation none = obs;
+  none.face_detected = 0;
+  EXPECT_FALSE(frontal.Process(none).has_value());
+  const std::optional<msgs::ShLight> a = frontal.Process(obs);
+  ASSERT_TRUE(a.has_value());
+  EXPECT_EQ(a->units, msgs::ShLightUnits::kLinear);
+  EXPECT_EQ(a->bands, 3u);
+  EXPECT_EQ(a->header.stamp_ns, obs.header.stamp_ns);
+  EXPECT_GT(a->confidence, 0.1f);  // above the hold's threshold: the light itself is published
+  EXPECT_LE(a->confidence, 1.f);
+  EXPECT_LT(angle(a->dominant_direction, u), 10);
+
+  // The head turned 90 degrees about the camera's y axis: the light turns with it.
+  const double h = std::sqrt(0.5);
+  msgs::FaceObservation turned = obs;
+  turned.head_pose.rotation = {h, 0, h, 0};
+  FaceLightPipeline rotated(model, {});
+  const std::optional<msgs::ShLight> b = rotated.Process(turned);
+  ASSERT_TRUE(b.has_value());
+  const std::array<double, 9> r = MatrixFromQuaternion({h, 0, h, 0});
+  const std::array<float, 3> expected = RotateVector(r, std::to_array(a->dominant_direction));
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(b->dominant_direction[k], expected[k], 1e-4);
+
+  msgs::FaceObservation other = obs;
+  other.sample_count = 7;
+  PROBELESS_EXPECT_THROWS_MESSAGE(
+      frontal.Process(other), fl::FaceLightError,
+      "observation has 7 samples, the model " + std::to_string(frontal.SampleCount()));
 }
 
 TEST(LightHold, BacklitFaceDoesNotBrightenTheVirtualObject) {

@@ -23,21 +23,18 @@
 // Exit: 0 on SIGINT/SIGTERM, 2 on bad params or model (one line on stderr), 1 otherwise.
 #include "probeless/node/main.h"
 
+#include <algorithm>
+#include <array>
 #include <fstream>
 #include <optional>
 #include <string>
 
-#include "probeless/face_light/estimator.h"
-#include "probeless/face_light/linear_light.h"
 #include "probeless/face_light/model.h"
-#include "probeless/face_track/face_tracker.h"
-#include "probeless/face_track/head_model.h"
+#include "probeless/face_track/face_light_pipeline.h"
 #include "probeless/face_track/light_output.h"
-#include "probeless/light/fusion.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/data_file.h"
 #include "probeless/node/node.h"
-
 namespace {
 
 using namespace probeless;
@@ -48,8 +45,9 @@ int Run(int argc, char** argv) {
   node::Node node(argc, argv, "face_light");
   const std::string model_path =
       node::ResolveDataFile(node.Param("model", "data/face_light/default_model.txt"));
-  const std::string mode = node.Param("mode", "rgb", {.choices = {"rgb", "gray"}});
-  fl::EstimatorOptions eo;
+  ft::FaceLightPipelineOptions po;
+  po.gray = node.Param("mode", "rgb", {.choices = {"rgb", "gray"}}) == "gray";
+  fl::EstimatorOptions& eo = po.estimator;
   eo.back_prior = node.Param("back_prior", 0.1);
   eo.ridge = node.Param("ridge", 0.0);
   eo.robust = node.Param("robust", false);
@@ -57,7 +55,7 @@ int Run(int argc, char** argv) {
   eo.weight_floor = node.Param("weight_floor", 0.0);
   eo.directional_fit = node.Param("directional_fit", eo.directional_fit);
   eo.directional_robust = node.Param("directional_robust", eo.directional_robust);
-  ft::SmootherOptions so;
+  ft::SmootherOptions& so = po.smoother;
   so.enabled = node.Param("smoothing", true);
   so.alpha =
       node.Param("smoothing_alpha", so.alpha, {.min = 0.0, .max = 1.0, .min_exclusive = true});
@@ -66,13 +64,13 @@ int Run(int argc, char** argv) {
   const std::string json_path = node.Param("json_path", "");
   const std::string json_mode = node.Param("json_mode", "frame", {.choices = {"frame", "exit"}});
 
-  const bool linear_output = node.Param("linear_output", true);
-  if (!json_path.empty() && !linear_output) {
+  po.linear_output = node.Param("linear_output", true);
+  if (!json_path.empty() && !po.linear_output) {
     throw node::UsageError(
         "face_light: json_path exports ARKit / WebXR light, which is linear radiance; it needs "
         "linear_output true");
   }
-  fl::LinearLightOptions lo;
+  fl::LinearLightOptions& lo = po.linear;
   const std::vector<double> albedo =
       node.Param("skin_albedo", std::vector<double>(lo.skin_albedo.begin(), lo.skin_albedo.end()));
   if (albedo.size() != 3) {
@@ -81,21 +79,13 @@ int Run(int argc, char** argv) {
   }
   std::copy(albedo.begin(), albedo.end(), lo.skin_albedo.begin());
   lo.unit_scale = node.Param("unit_scale", lo.unit_scale);
-  ft::HoldOptions ho;
+  ft::HoldOptions& ho = po.hold;
   ho.min_confidence = node.Param("hold_confidence", ho.min_confidence, {.min = 0.0, .max = 1.0});
   ho.blend_time_s =
       node.Param("hold_blend_s", ho.blend_time_s, {.unit = "s", .min = 0.0, .min_exclusive = true});
 
-  const fl::FaceLightModel model = fl::LoadModel(model_path);
-  const fl::FaceLightEstimator estimator(model, eo);
-  std::optional<fl::LinearLightConverter> converter;
-  try {
-    converter.emplace(model, lo);
-  } catch (const fl::FaceLightError& e) {
-    throw node::UsageError(std::string("face_light: ") + e.what());
-  }
-  ft::LightHold hold(ho);
-  ft::LightSmoother smoother(so);
+  // Bad model files and options throw FaceLightError (an InputError: exit 2).
+  ft::FaceLightPipeline pipeline(fl::LoadModel(model_path), po);
   std::ofstream json;
   if (!json_path.empty() && json_mode == "frame") {
     json.open(json_path, std::ios::trunc);
@@ -107,95 +97,28 @@ int Run(int argc, char** argv) {
       node.CreateSubscriber<msgs::FaceObservation>("face/observation", {.queue_depth = 64});
   bus::Publisher lights = node.CreatePublisher<msgs::ShLight>("face/light");
   int64_t received = 0, published = 0;
-  std::vector<float> gray(static_cast<size_t>(estimator.SampleCount()));
 
   auto on_observation = [&](bus::Sample&& sample) {
     const auto obs = msgs::ReadMessage<msgs::FaceObservation>(sample.data());
     obs->Validate();
     ++received;
-    if (!obs->face_detected) {
-      smoother.Miss();
-      return;
-    }
-    if (static_cast<int>(obs->sample_count) != estimator.SampleCount()) {
+    if (obs->face_detected && static_cast<int>(obs->sample_count) != pipeline.SampleCount()) {
       // Two models configured apart: no later observation can fit either, so the node ends.
       throw node::NodeError("face_light: observation has " + std::to_string(obs->sample_count) +
                             " samples but model '" + model_path + "' has " +
-                            std::to_string(estimator.SampleCount()) +
+                            std::to_string(pipeline.SampleCount()) +
                             " (the tracker must sample the same model)");
     }
-    const std::span<const uint64_t> valid(obs->sample_valid);
-    fl::LightEstimate e;
-    if (mode == "gray") {
-      for (size_t i = 0; i < gray.size(); ++i) {
-        gray[i] = (obs->sample_rgb[i][0] + obs->sample_rgb[i][1] + obs->sample_rgb[i][2]) / 3;
-      }
-      e = estimator.EstimateGray(gray, valid);
-    } else {
-      e = estimator.EstimateRgb({&obs->sample_rgb[0][0], gray.size() * 3}, valid);
-    }
-    if (e.channels == 0) {
-      smoother.Miss();
-      return;
-    }
-    float confidence = e.confidence * obs->quality;
-    if (linear_output) {
-      // The model's compressed units -> linear radiance, the skin albedo compensated; the
-      // confidence from the cues' calibrated expected error (docs/face_light.md, "Confidence").
-      // The tracking quality is left out: it is not calibrated against the light's error (0-0.7
-      // on Yale B crops whose estimates are good).
-      const fl::LinearLight linear =
-          converter->Convert({&obs->sample_rgb[0][0], gray.size() * 3}, valid, e);
-      if (!linear.valid) {
-        smoother.Miss();
-        return;
-      }
-      confidence = static_cast<float>(
-          light::ConfidenceFromExpectedError(fl::FaceLightExpectedErrorDeg(linear)));
-      e.channels = 3;
-      e.coefficients = linear.coefficients;
-      e.dominant_direction = linear.direction;
-      e.intensity = linear.intensity;
-    }
-    e.confidence = confidence;
-    e = smoother.Update(e);
-    confidence = e.confidence;
-    // Face frame -> camera frame.
-    const auto& q = obs->head_pose.rotation;
-    std::array<double, 9> r{1, 0, 0, 0, 1, 0, 0, 0, 1};
-    if (q.w != 0 || q.x != 0 || q.y != 0 || q.z != 0) {
-      r = ft::MatrixFromQuaternion({q.w, q.x, q.y, q.z});
-    }
-    ft::Sh9Rgb camera = ft::RotateSh9(e.coefficients, r);
-    std::array<float, 3> direction = ft::RotateVector(r, e.dominant_direction);
-    float intensity = e.intensity;
-    if (linear_output) {
-      // An unlit or backlit face: the last confident light, fading to its ambient term.
-      const ft::LightHold::Output held =
-          hold.Update(camera, direction, intensity, confidence, obs->header.stamp_ns);
-      camera = held.coefficients;
-      direction = held.direction;
-      intensity = held.intensity;
-    }
-
-    bus::Loan loan = lights.Borrow(sizeof(msgs::ShLight));
-    auto out = msgs::WriteMessage<msgs::ShLight>(loan.data());
-    *out = msgs::ShLight{};
-    out->header = obs->header;
-    out->bands = 3;
-    for (int n = 0; n < 9; ++n) {
-      for (int c = 0; c < 3; ++c) out->coefficients[n][c] = camera[n][c];
-    }
-    for (int k = 0; k < 3; ++k) out->dominant_direction[k] = direction[k];
-    out->intensity = intensity;
-    out->confidence = std::clamp(confidence, 0.f, 1.f);
-    out->units = linear_output ? msgs::ShLightUnits::kLinear : msgs::ShLightUnits::kFaceModel;
-    lights.Publish(std::move(loan));
+    const std::optional<msgs::ShLight> light = pipeline.Process(*obs);
+    if (!light) return;
+    lights.PublishCopy(std::as_bytes(std::span(&*light, 1)));
     ++published;
     if (!json_path.empty()) {
-      last_json = ft::LightJson(camera, direction, intensity, std::clamp(confidence, 0.f, 1.f),
-                                ft::LightColour(camera), obs->header.stamp_ns,
-                                std::string(obs->header.FrameId()), out->units);
+      ft::Sh9Rgb camera{};
+      for (int n = 0; n < 9; ++n) std::copy_n(light->coefficients[n], 3, camera[n].begin());
+      last_json = ft::LightJson(camera, std::to_array(light->dominant_direction), light->intensity,
+                                light->confidence, ft::LightColour(camera), light->header.stamp_ns,
+                                std::string(light->header.FrameId()), light->units);
       if (json_mode == "frame") json << last_json << '\n' << std::flush;
     }
   };

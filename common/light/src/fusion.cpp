@@ -27,9 +27,7 @@ double AngleDeg(const float* a, const float* b) {
 }  // namespace
 
 double ConfidenceFromExpectedError(double error_deg) {
-  if (!(error_deg >= 0)) return 0;
-  const double r = error_deg / kConfidenceReferenceErrorDeg;
-  return 1 / (1 + r * r);
+  return msgs::ShLightConfidenceFromExpectedError(error_deg);
 }
 
 double ExpectedErrorFromConfidence(double confidence) {

@@ -1,6 +1,7 @@
 // ShLight: incident lighting as RGB spherical-harmonic coefficients.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -77,6 +78,17 @@ inline ShLightUnits ShLightUnitsFromName(std::string_view name) {
 // of the camera's image intensities (1 = a white Lambertian surface of albedo 1 facing a uniform
 // radiance of 1 reads as full scale) when units is kLinear; `units` says what a producer
 // publishes, and consumers check it.
+// The one confidence scale of ShLight (docs/messages.md): confidence c <-> expected RMS angular
+// error e of the dominant direction, c = 1 / (1 + (e / kShLightReferenceErrorDeg)^2) (c = 0.5 at
+// 10 deg, 0.2 at 20 deg, 0.05 at 44 deg); c / (1 - c) = (10 deg / e)^2 is the estimate's
+// inverse-variance weight. e in degrees (>= 0; +inf or NaN -> 0) -> c in [0, 1].
+inline constexpr double kShLightReferenceErrorDeg = 10;
+inline double ShLightConfidenceFromExpectedError(double error_deg) {
+  if (!(error_deg >= 0)) return 0;
+  const double r = error_deg / kShLightReferenceErrorDeg;
+  return 1 / (1 + r * r);
+}
+
 struct ShLight {
   Header header;
   uint32_t bands = 0;  // 1..5; coefficient count bands^2 (1, 4, 9, 16, 25)
@@ -89,7 +101,8 @@ struct ShLight {
   float dominant_direction[3] = {};
   // Radiance of the dominant light in the same linear units as the coefficients (mean of R, G, B).
   float intensity = 0;
-  // Confidence of the estimate in [0, 1] (0 = no information, 1 = certain).
+  // Confidence of the estimate in [0, 1] (0 = no information, 1 = certain), on one scale for
+  // every producer: ShLightConfidenceFromExpectedError.
   float confidence = 0;
 
   static constexpr std::string_view kTypeName = "probeless_msgs/ShLight";

@@ -25,8 +25,8 @@ class FusionError : public InputError {
 // angular error e of the dominant direction, c = 1 / (1 + (e / kConfidenceReferenceErrorDeg)^2)
 // (c = 0.5 at 10 deg, 0.2 at 20 deg, 0.05 at 44 deg). Then c / (1 - c) = (10 deg / e)^2 is the
 // inverse-variance weight of the estimate.
-inline constexpr double kConfidenceReferenceErrorDeg = 10;
-// e in degrees (>= 0; +inf -> 0) -> c in [0, 1].
+inline constexpr double kConfidenceReferenceErrorDeg = msgs::kShLightReferenceErrorDeg;
+// e in degrees (>= 0; +inf -> 0) -> c in [0, 1] (msgs::ShLightConfidenceFromExpectedError).
 double ConfidenceFromExpectedError(double error_deg);
 // c in [0, 1] -> e in degrees (c = 0 -> +inf).
 double ExpectedErrorFromConfidence(double confidence);
