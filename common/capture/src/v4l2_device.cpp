@@ -231,36 +231,17 @@ class V4l2Device final : public Device {
       ::close(raw_fd);
       Fail(e, "cannot be opened by libv4l2");
     }
-    v4l2_capability cap{};
-    if (Xioctl(fd_, VIDIOC_QUERYCAP, &cap) < 0) {
-      Fail(errno == ENOTTY ? ENOTTY : errno, "does not answer VIDIOC_QUERYCAP");
+    // A device that fails half-way is released here (no destructor runs for a throwing
+    // constructor): a leaked descriptor would keep its buffer queue (EBUSY on every retry).
+    try {
+      Setup();
+    } catch (...) {
+      Release();
+      throw;
     }
-    description_ += " (" + std::string(reinterpret_cast<const char*>(cap.card)) + ")";
-    const uint32_t caps =
-        (cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
-    if (!(caps & V4L2_CAP_VIDEO_CAPTURE) || !(caps & V4L2_CAP_STREAMING)) {
-      throw CaptureError(ErrorKind::kBadInput,
-                         description_ +
-                             " is not a streaming video-capture node (a metadata "
-                             "node?): use the -video-index0 entry of /dev/v4l/by-id");
-    }
-    Negotiate();
-    for (const ControlWrite& w : MapControls(options.controls)) SetControl(w);
-    StartStreaming();
-    lock_at_ =
-        std::chrono::steady_clock::now() +
-        std::chrono::milliseconds(static_cast<int64_t>(options.controls.lock_after_s * 1000));
-    lock_pending_ = !LockControls(options.controls).empty();
   }
 
-  ~V4l2Device() override {
-    if (fd_ >= 0) {
-      v4l2_buf_type type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
-      Xioctl(fd_, VIDIOC_STREAMOFF, &type);
-      for (auto& b : buffers_) v4l2_munmap(b.first, b.second);
-      v4l2_close(fd_);
-    }
-  }
+  ~V4l2Device() override { Release(); }
 
   const std::string& description() const override { return description_; }
   std::optional<StreamInfo> colour_stream() const override { return stream_; }
@@ -351,6 +332,41 @@ class V4l2Device final : public Device {
       default:
         throw CaptureError(ErrorKind::kDeviceError, description_ + " " + detail);
     }
+  }
+
+  // Checks the capabilities, negotiates, applies the explicit controls and starts streaming.
+  void Setup() {
+    v4l2_capability cap{};
+    if (Xioctl(fd_, VIDIOC_QUERYCAP, &cap) < 0) {
+      Fail(errno == ENOTTY ? ENOTTY : errno, "does not answer VIDIOC_QUERYCAP");
+    }
+    description_ += " (" + std::string(reinterpret_cast<const char*>(cap.card)) + ")";
+    const uint32_t caps =
+        (cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
+    if (!(caps & V4L2_CAP_VIDEO_CAPTURE) || !(caps & V4L2_CAP_STREAMING)) {
+      throw CaptureError(ErrorKind::kBadInput,
+                         description_ +
+                             " is not a streaming video-capture node (a metadata "
+                             "node?): use the -video-index0 entry of /dev/v4l/by-id");
+    }
+    Negotiate();
+    for (const ControlWrite& w : MapControls(options_.controls)) SetControl(w);
+    StartStreaming();
+    lock_at_ =
+        std::chrono::steady_clock::now() +
+        std::chrono::milliseconds(static_cast<int64_t>(options_.controls.lock_after_s * 1000));
+    lock_pending_ = !LockControls(options_.controls).empty();
+  }
+
+  // Stops streaming, unmaps the buffers and closes the device (idempotent).
+  void Release() {
+    if (fd_ < 0) return;
+    v4l2_buf_type type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
+    Xioctl(fd_, VIDIOC_STREAMOFF, &type);
+    for (auto& b : buffers_) v4l2_munmap(b.first, b.second);
+    buffers_.clear();
+    v4l2_close(fd_);
+    fd_ = -1;
   }
 
   void Negotiate() {
