@@ -158,6 +158,54 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
   }
 }
 
+SceneFrame SceneFrameBuilder::FromGeometryBuffer(const msgs::GeometryBuffer& g,
+                                                 std::span<const std::byte> payload,
+                                                 const msgs::CameraInfo& info) {
+  const GeometryView view = ViewOfGeometryBuffer(g, payload, info);
+  SceneFrame frame;
+  frame.stamp_ns = g.header.stamp_ns;
+  frame.width = view.width;
+  frame.height = view.height;
+  frame.intrinsics = view.intrinsics;
+  frame.gbuffer_depth = view.depth;
+  frame.gbuffer_normals = view.normals;
+  frame.gbuffer_colour = view.colour;
+  return frame;
+}
+
+SceneFrame SceneFrameBuilder::FromDepthImage(const msgs::Image& depth,
+                                             std::span<const std::byte> payload,
+                                             const msgs::CameraInfo& info) {
+  DepthFromImage(depth, payload, info, &depth_);
+  SceneFrame frame;
+  frame.stamp_ns = depth.header.stamp_ns;
+  frame.width = static_cast<int>(depth.width);
+  frame.height = static_cast<int>(depth.height);
+  frame.intrinsics = IntrinsicsFrom(info, frame.width, frame.height);
+  frame.depth_image = depth_;
+  return frame;
+}
+
+void SceneFrameBuilder::AddImage(const msgs::Image& image, std::span<const std::byte> payload,
+                                 SceneFrame* frame) {
+  GreyFromImage(image, payload, frame->width, frame->height, &grey_, &rgb_);
+  frame->grey = grey_;
+  frame->colour = rgb_;
+}
+
+void SceneFrameBuilder::AddShadowDepth(const msgs::Image& depth, std::span<const std::byte> payload,
+                                       const msgs::CameraInfo& info, SceneFrame* frame) {
+  if (static_cast<int>(depth.width) != frame->width ||
+      static_cast<int>(depth.height) != frame->height) {
+    throw LightError("light::SceneFrameBuilder::AddShadowDepth: depth image is " +
+                     std::to_string(depth.width) + "x" + std::to_string(depth.height) +
+                     ", frame is " + std::to_string(frame->width) + "x" +
+                     std::to_string(frame->height));
+  }
+  DepthFromImage(depth, payload, info, &shadow_depth_);
+  frame->depth_image = shadow_depth_;
+}
+
 namespace {
 
 // The row-major rotation matrix of the normalised quaternion q; `what` (the public function)

@@ -1,15 +1,18 @@
 // Bus-message adapters of probeless_light: msgs::GeometryBuffer + CameraInfo -> GeometryView,
-// a raw depth16 image -> a G-buffer (the node's `depth` mode), results -> msgs::ShLight,
+// a raw depth16 image -> a G-buffer (the node's `depth` mode), the messages of one frame ->
+// ScenePipeline's SceneFrame (SceneFrameBuilder), results -> msgs::ShLight,
 // msgs::TransferBuffer and the indirect buffer as an rgb32f msgs::Image. Errors are LightError /
 // msgs::MessageError with one line.
 #pragma once
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <span>
 #include <vector>
 
 #include "probeless/light/estimate.h"
+#include "probeless/light/pipeline.h"
 #include "probeless/light/reliability.h"
 #include "probeless/light/transfer.h"
 #include "probeless/msgs/auxiliary_views.h"
@@ -58,9 +61,47 @@ void GeometryFromDepthImage(const msgs::Image& depth, std::span<const std::byte>
 
 // Linear grey intensity of an rgb8 / bgr8 / mono8 image into `grey` (width * height) and, if `rgb`
 // is given, the sRGB bytes in R, G, B order (3 per pixel; cleared for mono8) for EstimateLight's
-// albedo groups. Throws LightError for another encoding or a size other than width x height.
+// albedo groups. Throws LightError for a size other than width x height and msgs::MessageError for
+// an encoding without byte channels (all but rgb8 / bgr8 / mono8).
 void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, int width,
                    int height, std::vector<float>* grey, std::vector<uint8_t>* rgb = nullptr);
+
+// The SceneFrame of one frame's messages (scene_light's conversion): the geometry from the
+// triggering message (a G_r or a depth image), then I_c from the latest camera image and, for the
+// shadow search on a G_r, the depth image with its stamp. Units and frames are SceneFrame's:
+// depth in metres along the camera's z, normals in the camera frame, intrinsics in pixels of
+// `info` (which must be the size of the geometry). It owns the scratch buffers (grey, RGB bytes,
+// depths in metres) and reuses them from frame to frame: a frame borrows them (and the G_r's
+// payload) until the builder's next call of the same method. The aux views, focus and camera
+// rotation are left to the caller. Not thread-safe.
+class SceneFrameBuilder {
+ public:
+  // A frame with G_r's geometry (SceneGeometrySource::kGeometryBuffer): size, intrinsics of
+  // `info`, depth, normals and colour borrowed from `payload` (ViewOfGeometryBuffer), the stamp
+  // of g's header; no image yet. Throws as ViewOfGeometryBuffer.
+  SceneFrame FromGeometryBuffer(const msgs::GeometryBuffer& g, std::span<const std::byte> payload,
+                                const msgs::CameraInfo& info);
+  // A frame with a depth image's geometry (SceneGeometrySource::kDepthImage): size, intrinsics
+  // of `info`, depth_image in metres (DepthFromImage: depth16 x depth_scale, float32 as is), the
+  // stamp of its header; no image yet. Throws as DepthFromImage and IntrinsicsFrom.
+  SceneFrame FromDepthImage(const msgs::Image& depth, std::span<const std::byte> payload,
+                            const msgs::CameraInfo& info);
+  // Sets `frame`'s grey (linear, width * height) and colour (sRGB bytes in R, G, B order; empty
+  // for mono8) from `image` (GreyFromImage). Throws LightError for a size other than the frame's
+  // and msgs::MessageError for an encoding without byte channels (all but rgb8 / bgr8 / mono8).
+  void AddImage(const msgs::Image& image, std::span<const std::byte> payload, SceneFrame* frame);
+  // Sets `frame`'s depth_image (the shadow search's geometry on a G_r) to `depth` in metres
+  // (DepthFromImage with `info`). Throws LightError for a size other than the frame's and as
+  // DepthFromImage.
+  void AddShadowDepth(const msgs::Image& depth, std::span<const std::byte> payload,
+                      const msgs::CameraInfo& info, SceneFrame* frame);
+
+ private:
+  std::vector<float> grey_;
+  std::vector<uint8_t> rgb_;
+  std::vector<float> depth_;         // FromDepthImage's geometry, metres
+  std::vector<float> shadow_depth_;  // AddShadowDepth's, metres
+};
 
 // Fills `out` (header left to the caller) with the white light of `e`: every channel gets the
 // same coefficients (bands = min(e.bands, 5)), scaled by `scale`; direction, intensity,
