@@ -12,6 +12,9 @@
 //   PROBELESS_V4L2_STANDIN_YUYV    a recording of YUYV frames back to back (v4l2-ctl --stream-to)
 //   PROBELESS_V4L2_STANDIN_MJPEG   a recording of JPEG frames back to back (an MJPEG stream)
 //   PROBELESS_V4L2_STANDIN_STATE   a file holding "unplugged" or "busy"; absent/else = plugged in
+//   PROBELESS_V4L2_STANDIN_CORRUPT served MJPEG frames sent corrupt: indices "3,4" or "all" (needs
+//                                  _MJPEG; a YUYV stream is served as recorded)
+//   PROBELESS_V4L2_STANDIN_ERROR_FLAG  served buffers flagged V4L2_BUF_FLAG_ERROR: "6" or "all"
 //   PROBELESS_V4L2_STANDIN_LOG     event log: "<CLOCK_MONOTONIC ns> <event> key=value ..." lines
 //
 // The device: the recorded formats at one size, 30 or 15 frames/s (VIDIOC_S_PARM picks the
@@ -30,8 +33,13 @@
 // at the next call): the write end is closed (poll: POLLHUP), every ioctl and mmap of an open
 // descriptor fails with ENODEV, open fails with ENOENT, controls return to their defaults; replug
 // (the state changes back): open succeeds again. "busy": S_FMT, S_PARM and REQBUFS fail with
-// EBUSY (another process streams). Not emulated: read() I/O, other ioctls (ENOTTY, one line
-// each), several streaming descriptors at once (EBUSY), frames with V4L2_BUF_FLAG_ERROR.
+// EBUSY (another process streams). Damaged frames, by served-frame index (0 = the first frame
+// put in a buffer after STREAMON; = its sequence unless frames were dropped): a corrupt one is
+// the recorded JPEG truncated to its first kCorruptBytes bytes (bytesused says so; the rest of
+// the buffer keeps the previous frame, as after a short USB transfer), logged as "corrupt"; a
+// flagged one carries its recorded data with V4L2_BUF_FLAG_ERROR, logged as "flagged" (both:
+// "flagged", truncated). Not emulated: read() I/O, other ioctls (ENOTTY, one line each), several
+// streaming descriptors at once (EBUSY), frames truncated inside their scan data.
 #include <dlfcn.h>
 #include <fcntl.h>
 #include <libv4l2.h>
@@ -43,6 +51,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <charconv>
 #include <chrono>
 #include <condition_variable>
 #include <cstdarg>
@@ -117,8 +126,13 @@ constexpr const char* kSizeEnv = "PROBELESS_V4L2_STANDIN_SIZE";
 constexpr const char* kYuyvEnv = "PROBELESS_V4L2_STANDIN_YUYV";
 constexpr const char* kMjpegEnv = "PROBELESS_V4L2_STANDIN_MJPEG";
 constexpr const char* kStateEnv = "PROBELESS_V4L2_STANDIN_STATE";
+constexpr const char* kCorruptEnv = "PROBELESS_V4L2_STANDIN_CORRUPT";
+constexpr const char* kErrorFlagEnv = "PROBELESS_V4L2_STANDIN_ERROR_FLAG";
 constexpr const char* kLogEnv = "PROBELESS_V4L2_STANDIN_LOG";
 constexpr uint32_t kMaxBuffers = 32;
+// Bytes a corrupt MJPEG frame keeps: SOI and the start of the first segment, so the node's
+// decoder gets a JPEG that ends inside its headers (an error, never a padded image).
+constexpr size_t kCorruptBytes = 16;
 
 // The environment variable `name`, "" if unset.
 std::string Env(const char* name) {
@@ -134,6 +148,14 @@ const std::string& DevicePath() {
   return *path;
 }
 
+// Served-frame indices of one kind of damage (counted per STREAMON from 0).
+struct FrameList {
+  bool all = false;
+  std::set<uint64_t> indices;
+  // Whether served frame `n` is on the list.
+  bool Contains(uint64_t n) const { return all || indices.contains(n); }
+};
+
 // The recordings and files named by the environment.
 struct Config {
   uint32_t width = 640;
@@ -141,7 +163,9 @@ struct Config {
   std::vector<std::string> yuyv;   // frames of width * height * 2 bytes
   std::vector<std::string> mjpeg;  // one JPEG each
   std::string state_path;
-  std::string error;  // the first configuration error ("" = usable)
+  FrameList corrupt;     // MJPEG frames served truncated to kCorruptBytes
+  FrameList error_flag;  // buffers served with V4L2_BUF_FLAG_ERROR
+  std::string error;     // the first configuration error ("" = usable)
 };
 
 // The whole file `path` into `out`; false (and `error` set) if it cannot be read.
@@ -222,6 +246,28 @@ std::vector<std::string> SplitJpegs(const std::string& data, uint32_t width, uin
   return frames;
 }
 
+// `text` of variable `name` ("" = none, "all", or indices such as "3,4") into `out`; false (and
+// `error` set) if it is neither.
+bool ParseFrameList(const char* name, const std::string& text, FrameList& out, std::string& error) {
+  if (text == "all") {
+    out.all = true;
+    return true;
+  }
+  for (size_t pos = 0; pos < text.size();) {
+    const size_t end = std::min(text.find(',', pos), text.size());
+    uint64_t n = 0;
+    const auto [stop, ec] = std::from_chars(text.data() + pos, text.data() + end, n);
+    if (end == pos || ec != std::errc() || stop != text.data() + end || end + 1 == text.size()) {
+      error = std::string(name) + " '" + text +
+              "' is not a comma-separated list of served-frame indices (e.g. 3,4) or all";
+      return false;
+    }
+    out.indices.insert(n);
+    pos = end + 1;
+  }
+  return true;
+}
+
 // Reads and checks the environment (once).
 Config LoadConfig() {
   Config c;
@@ -241,6 +287,15 @@ Config LoadConfig() {
   }
   const std::string yuyv = Env(kYuyvEnv);
   const std::string mjpeg = Env(kMjpegEnv);
+  if (!ParseFrameList(kCorruptEnv, Env(kCorruptEnv), c.corrupt, c.error) ||
+      !ParseFrameList(kErrorFlagEnv, Env(kErrorFlagEnv), c.error_flag, c.error)) {
+    return c;
+  }
+  if ((c.corrupt.all || !c.corrupt.indices.empty()) && mjpeg.empty()) {
+    c.error = std::string(kCorruptEnv) + " needs " + kMjpegEnv +
+              " (only MJPEG frames are served corrupt)";
+    return c;
+  }
   if (yuyv.empty() && mjpeg.empty()) {
     c.error = std::string("set ") + kYuyvEnv + " and/or " + kMjpegEnv + " to a recording";
     return c;
@@ -362,6 +417,7 @@ struct Buffer {
   State state = State::kDequeued;
   uint32_t bytesused = 0;
   uint32_t sequence = 0;
+  bool error = false;        // served with V4L2_BUF_FLAG_ERROR
   int64_t timestamp_ns = 0;  // whole microseconds, as a timeval carries it
   int mapped = 0;            // live v4l2_mmap mappings
 };
@@ -384,6 +440,7 @@ struct Handle {
   bool streaming = false;
   bool stop_clock = false;
   uint64_t ticks = 0;
+  uint64_t served = 0;  // frames put in buffers since STREAMON (the damage lists' index)
   std::thread clock;
   std::condition_variable wake;  // a frame is done, the clock must stop, or the device went away
 };
@@ -502,7 +559,8 @@ size_t SizeImage(const Config& config) {
 }
 
 // One tick of the frame clock at `tick_ns` (caller holds the mutex): the auto modes step, and the
-// oldest queued buffer receives the recording's next frame, or the frame is dropped.
+// oldest queued buffer receives the recording's next frame (damaged if the lists say so), or the
+// frame is dropped.
 void Tick(Camera& camera, const Config& config, Handle& h, int64_t tick_ns, int64_t period_ns) {
   const uint64_t sequence = h.ticks++;
   RunAutoModes(camera, sequence);
@@ -518,17 +576,22 @@ void Tick(Camera& camera, const Config& config, Handle& h, int64_t tick_ns, int6
   h.queued.pop_front();
   Buffer& b = h.buffers[index];
   const std::string& frame = frames[source];
-  std::memcpy(h.memory + index * h.buffer_stride, frame.data(), frame.size());
-  b.bytesused = static_cast<uint32_t>(frame.size());
+  const uint64_t served = h.served++;
+  const bool corrupt = h.fourcc == V4L2_PIX_FMT_MJPEG && config.corrupt.Contains(served);
+  const size_t bytes = corrupt ? std::min(kCorruptBytes, frame.size()) : frame.size();
+  std::memcpy(h.memory + index * h.buffer_stride, frame.data(), bytes);
+  b.bytesused = static_cast<uint32_t>(bytes);
+  b.error = config.error_flag.Contains(served);
   b.sequence = static_cast<uint32_t>(sequence);
   b.timestamp_ns = (tick_ns - period_ns / 2) / 1000 * 1000;  // start of exposure, µs
   b.state = Buffer::State::kDone;
   h.done.push_back(index);
   [[maybe_unused]] const ssize_t written = ::write(h.signal_fd, "f", 1);
   h.wake.notify_all();
-  Log("frame handle=%d seq=%llu buffer=%u source=%zu bytes=%u ts_ns=%lld %s", h.id,
-      static_cast<unsigned long long>(sequence), index, source, b.bytesused,
-      static_cast<long long>(b.timestamp_ns), ControlSnapshot(camera).c_str());
+  Log("%s handle=%d seq=%llu served=%llu buffer=%u source=%zu bytes=%u ts_ns=%lld %s",
+      b.error ? "flagged" : (corrupt ? "corrupt" : "frame"), h.id,
+      static_cast<unsigned long long>(sequence), static_cast<unsigned long long>(served), index,
+      source, b.bytesused, static_cast<long long>(b.timestamp_ns), ControlSnapshot(camera).c_str());
 }
 
 // The frame clock of a streaming descriptor: ticks at start + k periods, watches the state file
@@ -600,6 +663,7 @@ void FillBuffer(const Handle& h, uint32_t index, size_t length, v4l2_buffer& b) 
   b.timestamp.tv_sec = buffer.timestamp_ns / 1'000'000'000;
   b.timestamp.tv_usec = (buffer.timestamp_ns % 1'000'000'000) / 1000;
   b.flags = V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC | V4L2_BUF_FLAG_TSTAMP_SRC_SOE;
+  if (buffer.error && buffer.state != Buffer::State::kQueued) b.flags |= V4L2_BUF_FLAG_ERROR;
   if (buffer.mapped > 0) b.flags |= V4L2_BUF_FLAG_MAPPED;
   if (buffer.state == Buffer::State::kQueued) b.flags |= V4L2_BUF_FLAG_QUEUED;
   if (buffer.state == Buffer::State::kDone) b.flags |= V4L2_BUF_FLAG_DONE;
@@ -785,6 +849,7 @@ int Dispatch(Camera& camera, const Config& config, Handle& h, unsigned long requ
       h.streaming = true;
       h.stop_clock = false;
       h.ticks = 0;
+      h.served = 0;
       std::shared_ptr<Handle> self = camera.handles.at(h.fd);
       const int64_t start = NowNs();
       h.clock = std::thread(RunClock, self, start);

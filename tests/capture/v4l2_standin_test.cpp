@@ -4,7 +4,9 @@
 // compared: frames arrive intact (YUYV exactly as the library converts the recorded bytes, MJPEG
 // exactly as it decodes the recorded JPEG, both within a small tolerance of OpenCV), stamps are
 // the buffers' timestamps, exposure / white balance / gain are locked after 2 s of auto, unplug
-// is detected within 1 s and the node reopens on replug, a busy device is retried without leaks.
+// is detected within 1 s and the node reopens on replug, a busy device is retried without leaks,
+// corrupt MJPEG frames and buffers the driver flags as erroneous are dropped with a warning while
+// the stream goes on, and a stream of nothing but corrupt frames ends the node.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
@@ -345,6 +347,17 @@ class V4l2StandinTest : public ::testing::Test {
     return jpegs;
   }
 
+  // What the library decodes from each of `jpegs` (the images the node must publish for them).
+  static std::vector<Rgb> Decoded(const std::vector<std::vector<uint8_t>>& jpegs) {
+    std::vector<Rgb> expected;
+    for (const std::vector<uint8_t>& jpeg : jpegs) {
+      Rgb rgb(kWidth * kHeight * 3);
+      capture::DecodeMjpegToRgb(jpeg, kWidth, kHeight, rgb.data(), kWidth * 3);
+      expected.push_back(std::move(rgb));
+    }
+    return expected;
+  }
+
   // The stand-in's environment: the device, the log, the state file, and `recordings`.
   std::vector<std::string> StandinEnv(const std::vector<std::string>& recordings) const {
     std::vector<std::string> env = {"PROBELESS_V4L2_STANDIN_DEVICE=" + device_,
@@ -539,12 +552,7 @@ TEST_F(V4l2StandinTest, YuyvFramesArriveIntactAndAutoControlsLockAfterTwoSeconds
 TEST_F(V4l2StandinTest, MjpegFramesDecodeToTheRecordedJpegs) {
   WriteYuyvRecording();
   const std::vector<std::vector<uint8_t>> jpegs = WriteMjpegRecording();
-  std::vector<Rgb> expected;  // what the library decodes from each recorded JPEG
-  for (const std::vector<uint8_t>& jpeg : jpegs) {
-    Rgb rgb(kWidth * kHeight * 3);
-    capture::DecodeMjpegToRgb(jpeg, kWidth, kHeight, rgb.data(), kWidth * 3);
-    expected.push_back(std::move(rgb));
-  }
+  const std::vector<Rgb> expected = Decoded(jpegs);
   bus::Subscriber image("/camera/image", msgs::TopicTypeOf<msgs::Image>(), {.queue_depth = 64});
   FrameCollector collector(image);
   NodeRun node(dir_, StandinEnv({YuyvEnv(), MjpegEnv()}),
@@ -578,6 +586,119 @@ TEST_F(V4l2StandinTest, MjpegFramesDecodeToTheRecordedJpegs) {
       }
     }
   }
+  const std::vector<Event> exit = Named(events, "exit");
+  ASSERT_EQ(exit.size(), 1u);
+  EXPECT_EQ(exit[0].Int("open"), 0);
+  EXPECT_EQ(exit[0].Int("mappings"), 0);
+}
+
+TEST_F(V4l2StandinTest, CorruptAndErrorFlaggedFramesAreDroppedAndStreamingGoesOn) {
+  const std::vector<std::vector<uint8_t>> jpegs = WriteMjpegRecording();
+  const std::vector<Rgb> expected = Decoded(jpegs);
+  bus::Subscriber image("/camera/image", msgs::TopicTypeOf<msgs::Image>(), {.queue_depth = 64});
+  FrameCollector collector(image);
+  // Served frames 3 and 4 are truncated JPEGs; 6 is flagged by the driver with its data intact,
+  // so only the flag can make the node drop it.
+  NodeRun node(dir_,
+               StandinEnv({MjpegEnv(), "PROBELESS_V4L2_STANDIN_CORRUPT=3,4",
+                           "PROBELESS_V4L2_STANDIN_ERROR_FLAG=6"}),
+               {"device:=" + device_, "pixel_format:=mjpeg", "lock_auto:=false", "max_frames:=20"});
+  EXPECT_EQ(node.Wait(), 0) << node.Err();
+  const std::vector<Frame> frames = collector.Finish();
+  const std::vector<Event> events = ReadEvents(Log());
+  const std::string err = node.Err();
+
+  // The stand-in served the damage asked for, on the one stream.
+  ASSERT_EQ(Named(events, "streamon").size(), 1u) << err;
+  const std::vector<Event> corrupt = Named(events, "corrupt");
+  const std::vector<Event> flagged = Named(events, "flagged");
+  ASSERT_EQ(corrupt.size(), 2u) << err;
+  EXPECT_EQ(corrupt[0].Int("served"), 3);
+  EXPECT_EQ(corrupt[1].Int("served"), 4);
+  for (const Event& e : corrupt) EXPECT_EQ(e.Int("bytes"), 16);
+  ASSERT_EQ(flagged.size(), 1u) << err;
+  EXPECT_EQ(flagged[0].Int("served"), 6);
+  EXPECT_EQ(flagged[0].Int("bytes"), int64_t(jpegs.at(flagged[0].Int("source")).size()));
+
+  // Exactly those three are missing on the bus: none of their stamps arrived, and every other
+  // frame served up to the 20th published one arrived intact, in order (ExpectFramesIntact only
+  // counts the stand-in's intact "frame" events).
+  std::set<int64_t> damaged = {flagged[0].Int("ts_ns")};
+  for (const Event& e : corrupt) damaged.insert(e.Int("ts_ns"));
+  for (const Frame& f : frames) {
+    EXPECT_FALSE(damaged.contains(f.stamp_mono_ns - kHalfExposureNs))
+        << "a damaged frame was published (stamp " << f.stamp_mono_ns << ")";
+  }
+  ASSERT_EQ(frames.size() + image.dropped(), 20u) << err;
+  EXPECT_EQ(ExpectFramesIntact(frames, events, expected, image.dropped()), std::set<int64_t>{1});
+  // Sequence numbers and the node's count are of published images: the drops leave no gap.
+  for (size_t i = 1; i < frames.size(); ++i) EXPECT_GT(frames[i].sequence, frames[i - 1].sequence);
+  EXPECT_EQ(frames.back().sequence, 20u);
+  EXPECT_NE(err.find("published 20 images and 0 depth images (max_frames reached)"),
+            std::string::npos)
+      << err;
+
+  // One warning per corrupt frame, naming the decoder's problem; the driver's flag once.
+  const std::string warning = "[warn] [/capture_v4l2] dropped a frame that cannot be converted (";
+  EXPECT_EQ(CountOf(err, "dropped a frame that cannot be converted"), 2u) << err;
+  EXPECT_NE(err.find(warning + "1 so far): MJPEG frame (16 bytes) is corrupt: "), std::string::npos)
+      << err;
+  EXPECT_NE(err.find(warning + "2 so far): MJPEG frame (16 bytes) is corrupt: "), std::string::npos)
+      << err;
+  EXPECT_EQ(CountOf(err, "flagged as erroneous"), 1u) << err;
+  EXPECT_NE(
+      err.find(Description() + ": dropped a buffer the driver flagged as erroneous (1 so far)\n"),
+      std::string::npos)
+      << err;
+  EXPECT_EQ(CountOf(err, "[error]"), 0u) << err;
+  const std::vector<Event> exit = Named(events, "exit");
+  ASSERT_EQ(exit.size(), 1u);
+  EXPECT_EQ(exit[0].Int("open"), 0);
+  EXPECT_EQ(exit[0].Int("mappings"), 0);
+}
+
+TEST_F(V4l2StandinTest, NothingButCorruptFramesEndsTheNodeAfterThirtyEvenWithRetry) {
+  WriteMjpegRecording();
+  bus::Subscriber image("/camera/image", msgs::TopicTypeOf<msgs::Image>(), {.queue_depth = 64});
+  FrameCollector collector(image);
+  // retry: true must not help: bad input is not a device that went away.
+  NodeRun node(dir_, StandinEnv({MjpegEnv(), "PROBELESS_V4L2_STANDIN_CORRUPT=all"}),
+               {"device:=" + device_, "pixel_format:=mjpeg", "lock_auto:=false", "retry:=true",
+                "retry_period_s:=0.1"});
+  // 30 frames at 30 fps take 1 s; 5 s leaves room for a loaded machine.
+  EXPECT_EQ(node.Wait(5s), 1) << node.Err();
+  const std::vector<Frame> frames = collector.Finish();
+  const std::vector<Event> events = ReadEvents(Log());
+  const std::string err = node.Err();
+
+  // Every served frame was corrupt; the node gave up at the 30th in a row, at once.
+  EXPECT_TRUE(frames.empty());
+  EXPECT_TRUE(Named(events, "frame").empty());
+  const std::vector<Event> corrupt = Named(events, "corrupt");
+  ASSERT_GE(corrupt.size(), 30u) << err;
+  ASSERT_EQ(Named(events, "close").size(), 1u) << err;
+  const int64_t stop_ns = Named(events, "close")[0].t_ns;
+  EXPECT_LT(stop_ns - corrupt[29].t_ns, 500'000'000) << "stopped long after the 30th";
+  EXPECT_LT(stop_ns - Named(events, "streamon").at(0).t_ns, 2'000'000'000);
+
+  // The first 10 drops warned (of 29), then one error line, the decoder's, last; not retried.
+  EXPECT_EQ(CountOf(err, "dropped a frame that cannot be converted"), 10u) << err;
+  EXPECT_NE(err.find("dropped a frame that cannot be converted (10 so far): "), std::string::npos)
+      << err;
+  EXPECT_NE(err.find("published 0 images and 0 depth images\n"), std::string::npos) << err;
+  EXPECT_EQ(CountOf(err, "[error]"), 1u) << err;
+  const std::string last_line = err.substr(err.rfind('\n', err.size() - 2) + 1);
+  // One line naming the device, the count, the decoder's reason and what to check.
+  EXPECT_TRUE(last_line.starts_with("[error] [/capture_v4l2] V4L2 device '" + device_ + "'"))
+      << err;
+  EXPECT_NE(last_line.find(": 30 frames in a row cannot be converted (MJPEG frame (16 bytes) is "
+                           "corrupt: "),
+            std::string::npos)
+      << err;
+  EXPECT_TRUE(last_line.ends_with("): check pixel_format, or the camera and its cable\n")) << err;
+  EXPECT_EQ(CountOf(err, "retrying"), 0u) << err;
+  EXPECT_EQ(CountOf(err, "waiting for it"), 0u) << err;
+  EXPECT_EQ(Named(events, "open").size(), 1u);
   const std::vector<Event> exit = Named(events, "exit");
   ASSERT_EQ(exit.size(), 1u);
   EXPECT_EQ(exit[0].Int("open"), 0);
@@ -715,6 +836,15 @@ TEST_F(V4l2StandinTest, BadStandinSettingsFailTheOpenWithOneLine) {
        "PROBELESS_V4L2_STANDIN_YUYV '" + (dir_ / "absent.yuyv").string() +
            "' cannot be read (No such file or directory)"},
       {"", "set PROBELESS_V4L2_STANDIN_YUYV and/or PROBELESS_V4L2_STANDIN_MJPEG to a recording"},
+      {"PROBELESS_V4L2_STANDIN_CORRUPT=3,x",
+       "PROBELESS_V4L2_STANDIN_CORRUPT '3,x' is not a comma-separated list of served-frame indices "
+       "(e.g. 3,4) or all"},
+      {"PROBELESS_V4L2_STANDIN_ERROR_FLAG=6, " + yuyv,
+       "PROBELESS_V4L2_STANDIN_ERROR_FLAG '6,' is not a comma-separated list of served-frame "
+       "indices (e.g. 3,4) or all"},
+      {"PROBELESS_V4L2_STANDIN_CORRUPT=3 " + yuyv,
+       "PROBELESS_V4L2_STANDIN_CORRUPT needs PROBELESS_V4L2_STANDIN_MJPEG (only MJPEG frames are "
+       "served corrupt)"},
   };
   for (const auto& [env, line] : cases) {
     // retry: true does not help: bad settings are not a missing device.

@@ -89,11 +89,15 @@ void FramePublisher::PublishInfo(int64_t stamp_mono_ns, uint64_t sequence) {
 }
 
 void FramePublisher::Publish(const FrameSet& frames) {
+  // Counted once published: a frame that does not convert (dropped by the loop) takes no
+  // sequence number and is not reported as published.
   if (frames.depth && depth_ != nullptr) {
-    PublishImage(*depth_, *frames.depth, ++depth_count_);
+    PublishImage(*depth_, *frames.depth, depth_count_ + 1);
+    ++depth_count_;
   }
   if (frames.colour && image_ != nullptr) {
-    PublishImage(*image_, *frames.colour, ++colour_count_);
+    PublishImage(*image_, *frames.colour, colour_count_ + 1);
+    ++colour_count_;
     PublishInfo(frames.colour->stamp_mono_ns, colour_count_);
   } else if (frames.depth && image_ == nullptr) {
     PublishInfo(frames.depth->stamp_mono_ns, depth_count_);
@@ -104,6 +108,10 @@ void FramePublisher::Publish(const FrameSet& frames) {
 // -------------------------------------------------------------------------------
 
 namespace {
+
+// Consecutive frames that cannot be converted before the node gives up (1 s at 30 fps): a single
+// corrupt frame is dropped, a camera that sends nothing usable is an error.
+constexpr int kMaxCorruptFramesInARow = 30;
 
 struct Settings {
   std::string frame_id;
@@ -143,6 +151,7 @@ int RunCaptureNode(node::Node& node, const DeviceOpener& open) {
   size_t image_capacity = 0;
   size_t depth_capacity = 0;
   uint64_t frames_total = 0;
+  uint64_t corrupt_total = 0;  // frames dropped because they could not be converted
   bool waiting_logged = false;
   const auto stall = std::chrono::nanoseconds(static_cast<int64_t>(s.stall_timeout_s * 1e9));
 
@@ -216,6 +225,7 @@ int RunCaptureNode(node::Node& node, const DeviceOpener& open) {
                              camera_info.get(), intrinsics.intrinsics, depth_stream ? 0.001 : 0.0,
                              s.frame_id);
     auto last_frame = std::chrono::steady_clock::now();
+    int corrupt_in_a_row = 0;
     try {
       FrameSet frames;
       while (node.ok()) {
@@ -230,7 +240,27 @@ int RunCaptureNode(node::Node& node, const DeviceOpener& open) {
           continue;
         }
         last_frame = std::chrono::steady_clock::now();
-        publisher.Publish(frames);
+        try {
+          publisher.Publish(frames);
+          corrupt_in_a_row = 0;
+        } catch (const CaptureError& e) {
+          // One corrupt frame (a truncated MJPEG) is dropped; a stream of them is a broken or
+          // misconfigured camera and ends the node as before.
+          if (e.kind() != ErrorKind::kBadInput) throw;
+          if (++corrupt_in_a_row >= kMaxCorruptFramesInARow) {
+            throw CaptureError(ErrorKind::kBadInput,
+                               device->description() + ": " +
+                                   std::to_string(kMaxCorruptFramesInARow) +
+                                   " frames in a row cannot be converted (" + e.what() +
+                                   "): check pixel_format, or the camera and its cable");
+          }
+          ++corrupt_total;
+          if (corrupt_total <= 10 || corrupt_total % 100 == 0) {
+            node.Warn() << "dropped a frame that cannot be converted (" << corrupt_total
+                        << " so far): " << e.what();
+          }
+          continue;
+        }
         ++frames_total;
         if (s.max_frames != 0 && frames_total >= s.max_frames) {
           node.Info() << "published " << publisher.published_colour() << " images and "

@@ -277,6 +277,16 @@ class V4l2Device final : public Device {
       Fail(errno, "VIDIOC_DQBUF failed");
     }
     held_ = static_cast<int>(buf.index);
+    if (buf.flags & V4L2_BUF_FLAG_ERROR) {
+      // The driver says the data may be corrupt (e.g. a USB packet lost): the frame is dropped,
+      // the buffer requeued by the next call.
+      ++error_buffers_;
+      if (error_buffers_ <= 10 || error_buffers_ % 100 == 0) {
+        log_(description_ + ": dropped a buffer the driver flagged as erroneous (" +
+             std::to_string(error_buffers_) + " so far)");
+      }
+      return false;
+    }
     RawFrame f;
     f.format = stream_.format;
     f.width = stream_.width;
@@ -487,6 +497,7 @@ class V4l2Device final : public Device {
 
   V4l2Options options_;
   std::function<void(const std::string&)> log_;
+  uint64_t error_buffers_ = 0;  // buffers dequeued with V4L2_BUF_FLAG_ERROR
   std::string path_;
   std::string description_;
   int fd_ = -1;
