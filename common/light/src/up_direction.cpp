@@ -20,7 +20,7 @@ UpDirection EstimateUpDirection(const GeometryView& geometry, const UpDirectionO
   if (!(options.min_support >= 0 && options.min_support <= 1)) {
     throw LightError("light::EstimateUpDirection: min_support must be in [0, 1]");
   }
-  ValidateGeometryView(geometry, "light::EstimateUpDirection");
+  ValidateGeometryView(geometry, "EstimateUpDirection");
   constexpr double kDeg = std::numbers::pi / 180;
   std::vector<Vec3f> normals;
   size_t valid = 0;

@@ -65,7 +65,8 @@ struct FocusOptions {
 };
 
 // Every option of the node and the evaluation; the defaults are the node's (docs/nodes.md,
-// scene_light) for subsample 1.
+// scene_light) for subsample 1, except `shadow.enabled` (the library's true; the node's param
+// `shadows` defaults to false, docs/light.md "Where it runs").
 struct ScenePipelineOptions {
   SceneGeometrySource source = SceneGeometrySource::kGeometryBuffer;
   // SSDO transfer (eq. 6-9); the node sets max_occluder_distance_m = 2 x radius_m (the defaults).
@@ -107,8 +108,8 @@ struct ScenePipelineOptions {
   bool point_warm_start = true;
 
   // Cast shadows refine the distant light's direction (RefineLightWithShadows) when the distant
-  // model is used and temporal.frames == 1. The node turns them off for OursFast (subsample 4):
-  // the search's ~10 ms wall breaks its 15 ms budget. `shadow.image_cues` applies to a search on
+  // model is used and temporal.frames == 1. The node's `shadows` param defaults to off
+  // (docs/light.md "Where it runs"). `shadow.image_cues` applies to a search on
   // a G-buffer, `depth_image_cues` to one on a depth image (raw sensor depth needs them: without
   // them its quantisation lets a wrong occluder explain a shadow; RawDepthShadowOptions).
   ShadowOptions shadow;

@@ -17,8 +17,9 @@
 namespace probeless::light {
 
 struct ShadowOptions {
-  // EstimateSceneLight: refine the distant estimate's direction (on by default: measured in
-  // docs/benchmarks/scene_light.md, "Cast shadows").
+  // EstimateSceneLight: refine the distant estimate's direction (on in the library; off in the
+  // scene_light node: docs/light.md "Where it runs"; measured in docs/benchmarks/scene_light.md,
+  // "Round 4").
   bool enabled = true;
   // Pixel strides of the points (both >= 1): the global pass over the sphere and the refinement.
   int coarse_stride = 16;
