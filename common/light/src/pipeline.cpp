@@ -95,11 +95,12 @@ void Validate(const ScenePipelineOptions& o) {
 }  // namespace
 
 std::vector<double> DefaultSceneConfidenceKnots(SceneGeometrySource source) {
-  // tools/light_prior/fit_confidence.py on the validation split (docs/light.md "Confidence").
+  // tools/light_prior/fit_confidence.py on the train and validation splits (docs/light.md
+  // "Confidence").
   if (source == SceneGeometrySource::kDepthImage) {
-    return {0.000, 66.3, 0.127, 45.4, 0.334, 44.4, 0.745, 24.8};
+    return {0.003, 66.2, 0.199, 48.3, 0.334, 44.5, 0.671, 31.8};
   }
-  return {0.074, 65.8, 0.214, 44.4, 0.310, 44.3, 0.702, 25.7};
+  return {0.151, 58.5, 0.316, 43.2, 0.557, 31.1};
 }
 
 struct ScenePipeline::State {
@@ -401,10 +402,7 @@ const ScenePipelineResult& ScenePipeline::Process(const SceneFrame& f) {
   if (r.light.valid) {
     r.light.confidence = static_cast<float>(s.confidence.Apply(r.light.confidence));
     if (o.uncertainty_blur > 0 && !s.confidence.identity()) {
-      for (size_t k = 1; k < r.light.coefficients.size(); ++k) {
-        const int l = static_cast<int>(std::sqrt(static_cast<double>(k)));  // band of k
-        r.light.coefficients[k] *= UncertaintyBandFactor(r.light.confidence, o.uncertainty_blur, l);
-      }
+      BlurByUncertainty(r.light.coefficients, r.light.confidence, o.uncertainty_blur);
     }
   }
   r.timings.cpu_ms_estimate = ThreadCpuMs() - cpu_estimate;
