@@ -4,8 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <numbers>
+#include <random>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -94,6 +97,43 @@ TEST(FuseLightsTest, UncertaintyBandFactorIsTheGaussianBlurOfTheExpectedError) {
   EXPECT_EQ(UncertaintyBandFactor(0.0, 1, 1), 0);
   EXPECT_EQ(UncertaintyBandFactor(0.0, 1, 0), 1);
   EXPECT_LT(UncertaintyBandFactor(0.05, 1, 2), UncertaintyBandFactor(0.05, 1, 1));
+}
+
+// Both layouts scale coefficient k by the factor of its band (0 for k = 0, 1 for 1..3, 2 for 4..8,
+// 3 for 9..15, 4 for 16..24), the RGB one with the factor rounded to float.
+TEST(FuseLightsTest, BlurByUncertaintyScalesEachCoefficientByItsBand) {
+  constexpr int kBandOf[25] = {0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3,
+                               3, 3, 3, 4, 4, 4, 4, 4, 4, 4, 4, 4};
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> value(-1, 1);
+  std::vector<double> white(25);
+  std::vector<std::array<float, 3>> rgb(25);
+  for (size_t k = 0; k < white.size(); ++k) {
+    white[k] = value(rng);
+    for (float& c : rgb[k]) c = static_cast<float>(value(rng));
+  }
+  const std::vector<double> white_in = white;
+  const std::vector<std::array<float, 3>> rgb_in = rgb;
+  BlurByUncertainty(white, 0.3, 1.5);
+  BlurByUncertainty(rgb, 0.3, 1.5);
+  for (size_t k = 0; k < white.size(); ++k) {
+    const double f = UncertaintyBandFactor(0.3, 1.5, kBandOf[k]);
+    EXPECT_EQ(white[k], white_in[k] * f) << "coefficient " << k;
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(rgb[k][c], rgb_in[k][c] * static_cast<float>(f)) << "coefficient " << k;
+    }
+  }
+  EXPECT_EQ(white[0], white_in[0]);
+  EXPECT_LT(std::abs(white[24]), 0.9 * std::abs(white_in[24]));  // the highest band blurred most
+  // Blur 0 leaves the light as it is; no known direction (c = 0) keeps band 0 only.
+  std::vector<double> unblurred = white_in;
+  BlurByUncertainty(unblurred, 0.3, 0);
+  EXPECT_EQ(unblurred, white_in);
+  std::vector<std::array<float, 3>> ambient = rgb_in;
+  BlurByUncertainty(std::span(ambient).first(9), 0, 1);
+  EXPECT_EQ(ambient[0], rgb_in[0]);
+  for (size_t k = 1; k < 9; ++k) EXPECT_EQ(ambient[k], (std::array<float, 3>{0, 0, 0}));
+  EXPECT_EQ(ambient[9], rgb_in[9]);  // beyond the span: untouched
 }
 
 TEST(FuseLightsTest, InverseVarianceWeights) {

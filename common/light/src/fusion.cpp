@@ -44,6 +44,30 @@ double UncertaintyBandFactor(double confidence, double blur, int band) {
   return std::exp(-0.5 * band * (band + 1) * sigma * sigma);
 }
 
+namespace {
+
+// The band loop of both layouts: scale(coefficient, factor) for every coefficient of band >= 1.
+template <class Coefficient, class Scale>
+void ScaleBands(std::span<Coefficient> coefficients, double confidence, double blur, Scale scale) {
+  for (size_t k = 1; k < coefficients.size(); ++k) {
+    const int band = static_cast<int>(std::sqrt(static_cast<double>(k)));
+    scale(coefficients[k], UncertaintyBandFactor(confidence, blur, band));
+  }
+}
+
+}  // namespace
+
+void BlurByUncertainty(std::span<double> coefficients, double confidence, double blur) {
+  ScaleBands(coefficients, confidence, blur, [](double& c, double f) { c *= f; });
+}
+
+void BlurByUncertainty(std::span<std::array<float, 3>> coefficients, double confidence,
+                       double blur) {
+  ScaleBands(coefficients, confidence, blur, [](std::array<float, 3>& c, double f) {
+    for (float& channel : c) channel *= static_cast<float>(f);
+  });
+}
+
 ConfidenceCalibration::ConfidenceCalibration(std::span<const double> knots) {
   if (knots.size() % 2 != 0) {
     throw FusionError("confidence calibration: " + std::to_string(knots.size()) +

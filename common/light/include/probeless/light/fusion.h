@@ -4,6 +4,7 @@
 // (docs/light.md, "Fusion").
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -36,6 +37,14 @@ double ExpectedErrorFromConfidence(double confidence);
 // ExpectedErrorFromConfidence(c) in radians (a Rayleigh-distributed angle whose median is e).
 // Band 0 is 1; blur 0 gives 1; c = 0 (no known direction) gives 0 for every band >= 1.
 double UncertaintyBandFactor(double confidence, double blur, int band);
+// A light of confidence c as its expected value under its own direction uncertainty: coefficient k
+// (SH order l (l + 1) + m, band l = floor(sqrt(k))) multiplied by UncertaintyBandFactor(c, blur,
+// l), so band 0 and blur 0 leave it unchanged. Two layouts, one band loop: a white light's
+// coefficients (LightEstimate), and RGB triples (msgs::ShLight, render::ShLightRgb), whose channels
+// are multiplied by the factor rounded to float.
+void BlurByUncertainty(std::span<double> coefficients, double confidence, double blur);
+void BlurByUncertainty(std::span<std::array<float, 3>> coefficients, double confidence,
+                       double blur);
 
 // A producer's raw confidence mapped onto the scale above: knots (raw confidence, expected error
 // in degrees), raw ascending in [0, 1], errors > 0; piecewise linear in the error between knots,
