@@ -19,30 +19,11 @@ FusionOutputs::FusionOutputs(node::Node& node, std::string world_frame, int aux_
 }
 
 void FusionOutputs::PublishTracking(const msgs::Header& header, const recon::FrameResult& r,
-                                    const TrackingCounts& counts) {
+                                    const recon::TrackingCounts& counts) {
   bus::Loan loan = tracking_pub_.Borrow(sizeof(msgs::TrackingStatus));
   auto t = msgs::WriteMessage<msgs::TrackingStatus>(loan.data());
   t->header = header;
-  t->state = r.state == recon::TrackingState::kLost        ? msgs::TrackingStatusState::kLost
-             : r.state == recon::TrackingState::kUncertain ? msgs::TrackingStatusState::kUncertain
-                                                           : msgs::TrackingStatusState::kTracked;
-  t->score = r.quality.score;
-  t->reasons = r.quality.reasons;
-  t->integrated = r.integrated ? 1 : 0;
-  t->relocalised = r.relocalised ? 1 : 0;
-  t->rms_m = r.icp.rms_m;
-  t->inlier_fraction = r.icp.inlier_fraction;
-  t->residual_ratio = r.quality.residual_ratio;
-  t->inlier_ratio = r.quality.inlier_ratio;
-  t->motion_translation_m = r.quality.motion_translation_m;
-  t->motion_rotation_deg = r.quality.motion_rotation_deg;
-  t->observability = r.quality.observability;
-  t->frames = counts.frames;
-  t->tracked_frames = counts.tracked;
-  t->uncertain_frames = counts.uncertain;
-  t->lost_frames = counts.lost;
-  t->relocalisations = counts.relocalisations;
-  t->SetReasonText(r.quality.text);
+  recon::FillTrackingStatus(r, counts, t.message);
   tracking_pub_.Publish(std::move(loan));
 }
 

@@ -17,20 +17,15 @@
 
 namespace probeless::fusion {
 
-// The running frame counts a TrackingStatus carries.
-struct TrackingCounts {
-  uint64_t frames = 0, tracked = 0, uncertain = 0, lost = 0, relocalisations = 0;
-};
-
 class FusionOutputs {
  public:
   // Creates scene/tracking, scene/pose and, with aux_pixels > 0, scene/aux for views of up to
   // aux_pixels^2 pixels. `world_frame`: the poses' parent frame id.
   FusionOutputs(node::Node& node, std::string world_frame, int aux_pixels);
 
-  // scene/tracking: the frame's verdict (r.state, r.quality, r.icp) and the counts so far.
+  // scene/tracking: the frame's verdict and the counts so far (recon::FillTrackingStatus).
   void PublishTracking(const msgs::Header& header, const recon::FrameResult& r,
-                       const TrackingCounts& counts);
+                       const recon::TrackingCounts& counts);
   // scene/pose: camera -> world, child frame = header's frame id.
   void PublishPose(const msgs::Header& header, const recon::Pose& camera_to_world);
   // scene/aux (only when created with aux_pixels > 0): `views` as seen from camera_to_world.

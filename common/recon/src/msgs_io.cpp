@@ -95,6 +95,54 @@ void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload,
   }
 }
 
+DepthFrame DepthFrameFromMessages(const msgs::Image& depth, std::span<const std::byte> payload,
+                                  const msgs::CameraInfo& info, float min_m, float max_m) {
+  DepthFrame d;
+  d.header = depth.header;
+  d.intrinsics = IntrinsicsFromCameraInfo(info);
+  DepthFromImage(depth, payload, info.depth_scale, min_m, max_m, d.depth);
+  return d;
+}
+
+ColourFrame ColourFrameFromMessage(const msgs::Image& image, std::span<const std::byte> payload) {
+  ColourFrame c;
+  c.image = image;
+  GreyFromImage(image, payload, c.grey);
+  c.payload.assign(payload.begin(), payload.begin() + image.PayloadBytes());
+  return c;
+}
+
+std::optional<Vec3f> DominantDirection(const msgs::ShLight& light) {
+  const float* dir = light.dominant_direction;
+  const float len2 = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
+  if (!(len2 > 1e-6f) || !std::isfinite(len2)) return std::nullopt;
+  return Vec3f{dir[0], dir[1], dir[2]};
+}
+
+void FillTrackingStatus(const FrameResult& r, const TrackingCounts& counts,
+                        msgs::TrackingStatus* out) {
+  out->state = r.state == TrackingState::kLost        ? msgs::TrackingStatusState::kLost
+               : r.state == TrackingState::kUncertain ? msgs::TrackingStatusState::kUncertain
+                                                      : msgs::TrackingStatusState::kTracked;
+  out->score = r.quality.score;
+  out->reasons = r.quality.reasons;
+  out->integrated = r.integrated ? 1 : 0;
+  out->relocalised = r.relocalised ? 1 : 0;
+  out->rms_m = r.icp.rms_m;
+  out->inlier_fraction = r.icp.inlier_fraction;
+  out->residual_ratio = r.quality.residual_ratio;
+  out->inlier_ratio = r.quality.inlier_ratio;
+  out->motion_translation_m = r.quality.motion_translation_m;
+  out->motion_rotation_deg = r.quality.motion_rotation_deg;
+  out->observability = r.quality.observability;
+  out->frames = counts.frames;
+  out->tracked_frames = counts.tracked;
+  out->uncertain_frames = counts.uncertain;
+  out->lost_frames = counts.lost;
+  out->relocalisations = counts.relocalisations;
+  out->SetReasonText(r.quality.text);
+}
+
 void WriteGeometryBuffer(const DepthImage& depth, const Vec3Image& normals,
                          const msgs::Image* image, std::span<const std::byte> image_payload,
                          msgs::GeometryBuffer& out, std::span<std::byte> payload) {

@@ -3,6 +3,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -10,7 +12,10 @@
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/geometry_buffer.h"
 #include "probeless/msgs/image.h"
+#include "probeless/msgs/sh_light.h"
+#include "probeless/msgs/tracking_status.h"
 #include "probeless/recon/math.h"
+#include "probeless/recon/pipeline.h"
 #include "probeless/recon/tsdf_volume.h"
 
 namespace probeless::recon {
@@ -29,6 +34,45 @@ void DepthFromImage(const msgs::Image& image, std::span<const std::byte> payload
 // Grey intensity from an rgb8, bgr8 or mono8 image. Throws ReconError for other encodings, an
 // empty image or a short payload.
 void GreyFromImage(const msgs::Image& image, std::span<const std::byte> payload, GreyImage& out);
+
+// One depth frame as FusionPipeline::Process takes it: the depth image's header, its depth in
+// metres and the intrinsics of the camera_info it came with.
+struct DepthFrame {
+  msgs::Header header;
+  DepthImage depth;
+  Intrinsics intrinsics;
+};
+
+// The DepthFrame of a depth image and `info`: IntrinsicsFromCameraInfo(info), then
+// DepthFromImage with info.depth_scale and [min_m, max_m]. Throws ReconError as those two.
+DepthFrame DepthFrameFromMessages(const msgs::Image& depth, std::span<const std::byte> payload,
+                                  const msgs::CameraInfo& info, float min_m, float max_m);
+
+// One colour image held for the depth frame with its stamp: the message, a copy of its pixels
+// (PayloadBytes(), G_r's colour) and its grey intensity (the merge's guidance).
+struct ColourFrame {
+  msgs::Image image;
+  std::vector<std::byte> payload;
+  GreyImage grey;
+};
+
+// The ColourFrame of an rgb8, bgr8 or mono8 image. Throws ReconError as GreyFromImage.
+ColourFrame ColourFrameFromMessage(const msgs::Image& image, std::span<const std::byte> payload);
+
+// The dominant direction of `light` (in its frame, towards the light), or none when the light has
+// none: a squared length not above 1e-6 or not finite.
+std::optional<Vec3f> DominantDirection(const msgs::ShLight& light);
+
+// The running frame counts a TrackingStatus carries.
+struct TrackingCounts {
+  uint64_t frames = 0, tracked = 0, uncertain = 0, lost = 0, relocalisations = 0;
+};
+
+// Fills `out` (header left to the caller) with the verdict of `r` (state: kEmpty counts as
+// tracked; quality cues, ICP RMS and inlier fraction, integrated, relocalised, the reason text)
+// and `counts`.
+void FillTrackingStatus(const FrameResult& r, const TrackingCounts& counts,
+                        msgs::TrackingStatus* out);
 
 // Fills a GeometryBuffer (Init + planes) of depth.width x depth.height: depth (metres, 0 = none),
 // normals (camera frame) and the colour of `image` (rgb8/bgr8/mono8 of the same size, converted to
