@@ -1,21 +1,15 @@
-// The renderer's output topic and its light-message helper.
+// The renderer's output topic.
 #pragma once
 
 #include <cstdint>
-#include <optional>
 
 #include "probeless/bus/bus.h"
-#include "probeless/light/transfer.h"
 #include "probeless/msgs/msgs.h"
 #include "probeless/node/growing_publisher.h"
 #include "probeless/node/node.h"
 #include "probeless/render/renderer.h"
 
 namespace probeless::renderer_node {
-
-// The dominant light of eq. 10 from a light message: its own direction and intensity, else
-// Sloan's optimal linear direction of the mean colour and sh::DirectionalPower along it.
-light::DominantLight DominantOf(const msgs::ShLight& m);
 
 // render/composite (Image rgb8): created with the first frame (its size is the camera's),
 // re-created when a frame is larger; 8 slots, a history of the last two composites for

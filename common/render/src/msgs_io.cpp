@@ -1,7 +1,11 @@
 #include "probeless/render/msgs_io.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
+
+#include "probeless/sh/sh.h"
 
 namespace probeless::render {
 
@@ -17,6 +21,28 @@ ShLightRgb LightFromMsg(const msgs::ShLight& light) {
     for (int c = 0; c < 3; ++c) out.coefficients[k][c] = light.coefficients[k][c];
   }
   return out;
+}
+
+light::DominantLight DominantLightFromMsg(const msgs::ShLight& light) {
+  light::DominantLight d;
+  const float* md = light.dominant_direction;
+  if (light.intensity > 0 && md[0] * md[0] + md[1] * md[1] + md[2] * md[2] > 0.5f) {
+    d.direction = {md[0], md[1], md[2]};
+    d.intensity = light.intensity;
+    return d;
+  }
+  if (light.bands < 2) return d;
+  std::vector<double> grey(light.bands * light.bands);
+  for (size_t k = 0; k < grey.size(); ++k) {
+    grey[k] =
+        (light.coefficients[k][0] + light.coefficients[k][1] + light.coefficients[k][2]) / 3.0;
+  }
+  const sh::Vec3 dir = sh::OptimalLinearDirection(grey.data());
+  if (dir[0] == 0 && dir[1] == 0 && dir[2] == 0) return d;
+  d.direction = {static_cast<float>(dir[0]), static_cast<float>(dir[1]),
+                 static_cast<float>(dir[2])};
+  d.intensity = static_cast<float>(std::max(0.0, sh::DirectionalPower(grey, dir)));
+  return d;
 }
 
 bool AcceptLightUnits(msgs::ShLightUnits units, std::string* warning) {

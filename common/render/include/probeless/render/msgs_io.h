@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "probeless/light/transfer.h"
 #include "probeless/msgs/camera_info.h"
 #include "probeless/msgs/geometry.h"
 #include "probeless/msgs/geometry_buffer.h"
@@ -18,6 +19,12 @@ namespace probeless::render {
 
 // The light's RGB coefficients. Throws RenderError if the message fails ShLight::Validate.
 ShLightRgb LightFromMsg(const msgs::ShLight& light);
+// The dominant light of eq. 10 (the differential's indirect term and crisp shadow) of a light
+// that passed ShLight::Validate: the message's own dominant_direction and intensity when it has
+// them (intensity > 0 and a direction of squared length > 0.5), else Sloan's optimal linear
+// direction of the mean of R, G, B (sh::OptimalLinearDirection) and sh::DirectionalPower along
+// it, clamped to >= 0; none (zero direction and intensity) below 2 bands or without band 1.
+light::DominantLight DominantLightFromMsg(const msgs::ShLight& light);
 // Whether the renderer shades with a light of `units` (it needs linear radiance in the camera's
 // units): kLinear yes; kUnknown (a message recorded before the units field) and kLinearUnscaled
 // yes, taken as linear, with `*warning` set to one line saying so; kFaceModel (and any other
