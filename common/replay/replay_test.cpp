@@ -630,5 +630,19 @@ TEST(PlayerTest, LockStepSkipsANodeThatDiedAndWaitsForItsRespawn) {
   EXPECT_NE(all.find("lock-step: /victim is back on the bus"), std::string::npos) << all;
 }
 
+TEST(PlaybackSummaryTest, NamesPublishedTopicsAndOnlyTheFiguresThatApply) {
+  PlayerStats stats;
+  stats.published = 7;
+  stats.passes = 1;
+  stats.per_topic = {4, 2, 1};
+  EXPECT_EQ(PlaybackSummary(stats, {"/camera/image", "", "/camera/depth"}, 0.5, false),
+            "player: published 7 messages in 0.5 s, 1 pass(es); /camera/image 4; /camera/depth 1");
+  for (int i = 100; i >= 1; --i) stats.lateness_us.push_back(i);  // unsorted on purpose
+  stats.lockstep_wait_s = 0.25;
+  EXPECT_EQ(PlaybackSummary(stats, {"/a", "/b", "/c"}, 2, true),
+            "player: published 7 messages in 2 s, 1 pass(es); /a 4; /b 2; /c 1; lateness median "
+            "51 us, p99 100 us; lock-step wait 0.25 s");
+}
+
 }  // namespace
 }  // namespace probeless::replay

@@ -214,6 +214,12 @@ bool FlagParser::Parse(int argc, const char* const* argv) {
   return true;
 }
 
+bool FlagParser::Parse(const std::vector<std::string>& args) {
+  std::vector<const char*> argv{program_.c_str()};
+  for (const std::string& arg : args) argv.push_back(arg.c_str());
+  return Parse(static_cast<int>(argv.size()), argv.data());
+}
+
 bool FlagParser::Given(std::string_view name) const {
   for (const auto& flag : flags_) {
     if (flag.name == name) return flag.given;

@@ -132,6 +132,18 @@ TEST(FlagParser, StoresEveryKindOfFlag) {
   EXPECT_FALSE(t.flags.Given("--json"));
 }
 
+TEST(FlagParser, ParsesANodesOwnArgumentsWithoutTheProgramName) {
+  Tool t;
+  const std::vector<std::string> args{"--frames", "12", "a/b"};
+  t.flags.AddPositional("INPUT", &t.input, "the input");
+  EXPECT_TRUE(t.flags.Parse(args));
+  EXPECT_EQ(t.frames, 12);
+  EXPECT_EQ(t.input, "a/b");
+  EXPECT_EQ(probeless::testing::ThrownMessage<UsageError>(
+                [&] { t.flags.Parse(std::vector<std::string>{"--frames"}); }),
+            "--frames needs a value N");
+}
+
 TEST(FlagParser, AcceptsTheEqualsForm) {
   Tool t;
   EXPECT_TRUE(t.Parse({"--scenes=x=y", "--frames=3", "--json=", "--light-param=a:=1"}));

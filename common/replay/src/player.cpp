@@ -10,6 +10,7 @@
 #include <mutex>
 #include <optional>
 #include <regex>
+#include <sstream>
 #include <stdexcept>
 
 #include "probeless/bus/bus.h"
@@ -475,5 +476,25 @@ double Player::rate() const {
   return impl_->rate;
 }
 const std::vector<std::string>& Player::published_topics() const { return impl_->published_topics; }
+
+std::string PlaybackSummary(const PlayerStats& stats,
+                            const std::vector<std::string>& published_topics, double seconds,
+                            bool lockstep) {
+  std::ostringstream summary;
+  summary << "player: published " << stats.published << " messages in " << seconds << " s, "
+          << stats.passes << " pass(es)";
+  for (size_t t = 0; t < stats.per_topic.size() && t < published_topics.size(); ++t) {
+    if (!published_topics[t].empty())
+      summary << "; " << published_topics[t] << " " << stats.per_topic[t];
+  }
+  if (!stats.lateness_us.empty()) {
+    std::vector<double> lateness = stats.lateness_us;
+    std::sort(lateness.begin(), lateness.end());
+    summary << "; lateness median " << lateness[lateness.size() / 2] << " us, p99 "
+            << lateness[std::min(lateness.size() - 1, lateness.size() * 99 / 100)] << " us";
+  }
+  if (lockstep) summary << "; lock-step wait " << stats.lockstep_wait_s << " s";
+  return summary.str();
+}
 
 }  // namespace probeless::replay

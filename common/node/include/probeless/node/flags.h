@@ -134,6 +134,10 @@ class FlagParser {
   // otherwise. Throws UsageError for a malformed command line (see the top of this file).
   bool Parse(int argc, const char* const* argv);
 
+  // The same for arguments without the program name: a node's own arguments (Node::args(), the
+  // ones before --ros-args), so its command line overrides the params read before.
+  bool Parse(const std::vector<std::string>& args);
+
   // Whether flag `name` (or the positional with metavar `name`) was given in the last Parse.
   bool Given(std::string_view name) const;
 

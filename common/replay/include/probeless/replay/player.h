@@ -100,4 +100,13 @@ class Player {
   std::unique_ptr<Impl> impl_;
 };
 
+// The line the player node prints when it ends: "player: published N messages in S s, P
+// pass(es)", then "; <topic> <count>" per published topic (`published_topics` as
+// Player::published_topics(), "" = not published), "; lateness median M us, p99 Q us" when
+// stats.lateness_us has entries, and "; lock-step wait W s" when `lockstep`. `seconds` is the
+// playback's wall time. Numbers in the stream's default format (6 significant digits).
+std::string PlaybackSummary(const PlayerStats& stats,
+                            const std::vector<std::string>& published_topics, double seconds,
+                            bool lockstep);
+
 }  // namespace probeless::replay
