@@ -559,4 +559,25 @@ TEST_F(RecorderTest, StartErrorsAndIdempotentStop) {
   EXPECT_EQ(reader.statistics().message_count, 0u);
 }
 
+TEST(RecorderReportTest, OneLinePerTopicAndFileThenTheSums) {
+  record::RecorderStats stats;
+  record::TopicStats image;
+  image.topic = "/camera/image";
+  image.received = 40;
+  image.dropped = 2;
+  image.invalid = 1;
+  image.bytes = 1000;
+  record::TopicStats depth = image;
+  depth.topic = "/camera/depth";
+  depth.dropped = 0;
+  stats.topics = {depth, image};
+  stats.files = {"a_0.mcap", "a_1.mcap"};
+  stats.bytes = 2000;
+  EXPECT_EQ(record::RecorderReport(stats),
+            "/camera/depth: received=40 dropped=0 invalid=1 bytes=1000\n"
+            "/camera/image: received=40 dropped=2 invalid=1 bytes=1000\n"
+            "file: a_0.mcap\nfile: a_1.mcap\n"
+            "summary: topics=2 received=80 dropped=2 bytes=2000 files=2\n");
+}
+
 }  // namespace

@@ -179,8 +179,8 @@ TEST_F(RecorderNodeTest, BadOptionsExitTwoWithOneLine) {
                    "unknown compression 'brotli' (expected none, zstd or lz4)");
   ExpectUsageError({"-o", out, "--all", "--bogus"}, "unknown option '--bogus' (see --help)");
   ExpectUsageError({"-o", out, "--all", "--split-size-mb", "big"},
-                   "option --split-size-mb: 'big' is not a number");
-  ExpectUsageError({"-o", out, "--all", "--queue-depth"}, "option --queue-depth needs a value");
+                   "--split-size-mb expects a number, got 'big'");
+  ExpectUsageError({"-o", out, "--all", "--queue-depth"}, "--queue-depth needs a value N");
   ExpectUsageError({"-o", out, "--regex", "(a"},
                    "invalid include regex '(a': Mismatched '(' and ')' in regular expression");
   ExpectUsageError(

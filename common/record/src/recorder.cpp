@@ -569,4 +569,22 @@ bool Recorder::Failed() const { return impl_->failed; }
 
 const RecorderOptions& Recorder::options() const { return impl_->options; }
 
+std::string RecorderReport(const RecorderStats& stats) {
+  std::string report;
+  uint64_t received = 0, dropped = 0;
+  for (const TopicStats& t : stats.topics) {
+    report += t.topic + ": received=" + std::to_string(t.received) +
+              " dropped=" + std::to_string(t.dropped) + " invalid=" + std::to_string(t.invalid) +
+              " bytes=" + std::to_string(t.bytes) + "\n";
+    received += t.received;
+    dropped += t.dropped;
+  }
+  for (const std::string& file : stats.files) report += "file: " + file + "\n";
+  report += "summary: topics=" + std::to_string(stats.topics.size()) +
+            " received=" + std::to_string(received) + " dropped=" + std::to_string(dropped) +
+            " bytes=" + std::to_string(stats.bytes) +
+            " files=" + std::to_string(stats.files.size()) + "\n";
+  return report;
+}
+
 }  // namespace probeless::record

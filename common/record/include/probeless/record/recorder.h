@@ -128,6 +128,12 @@ struct RecorderStats {
 // "<output>[.mcap]" when not splitting, else "<prefix>_<index>.mcap".
 std::string RecordFileName(const RecorderOptions& options, uint64_t index);
 
+// The report the recorder node prints at exit: one line per topic
+// "<topic>: received=N dropped=D invalid=I bytes=B", then "file: <path>" per file, then
+// "summary: topics=T received=N dropped=D bytes=B files=F" (received and dropped summed over the
+// topics, bytes = stats.bytes). Every line ends in '\n'.
+std::string RecorderReport(const RecorderStats& stats);
+
 class Recorder {
  public:
   // Checks the options (RecordError on a missing output, no selection, an invalid topic name or
