@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -162,6 +163,54 @@ TEST_F(RecorderNodeTest, ParamsSplitBySizeAndSigterm) {
   EXPECT_GE(files, 3);
   EXPECT_EQ(next, 41u);
   EXPECT_NE(out.find(" files=" + std::to_string(files) + "\n"), std::string::npos) << out;
+}
+
+// The disk filling up mid-recording: RLIMIT_FSIZE makes write() fail with EFBIG as a full disk
+// fails it with ENOSPC (the child inherits the limit and the ignored SIGXFSZ, both restored here
+// right after the spawn). The recorder stops by itself with one error line and exit 1, prints its
+// report, and the file opens, recovering every complete chunk in order.
+TEST_F(RecorderNodeTest, AFullDiskEndsWithOneErrorAndARecoverableFile) {
+  bus::Publisher rgb = ImagePublisher("/full/image", msgs::Encoding::kRgb8);  // 2,304 B of pixels
+  const std::string file = dir_ + "/full.mcap";
+  rlimit saved{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &saved), 0);
+  rlimit limit = saved;
+  limit.rlim_cur = 64 * 1024;
+  struct sigaction ignore {};
+  struct sigaction previous {};
+  ignore.sa_handler = SIG_IGN;
+  ASSERT_EQ(sigaction(SIGXFSZ, &ignore, &previous), 0);
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &limit), 0);
+  Process recorder(
+      "recorder", {"-o", file, "--compression", "none", "--chunk-size-mb", "0.005", "/full/image"});
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &saved), 0);
+  ASSERT_EQ(sigaction(SIGXFSZ, &previous, nullptr), 0);
+  ASSERT_TRUE(WaitFor([&] { return rgb.SubscriberCount() == 1; })) << recorder.Err();
+  for (uint64_t i = 1; i <= 100; ++i) {
+    PublishImage(rgb, msgs::Encoding::kRgb8, i);
+    std::this_thread::sleep_for(1ms);  // no bus drops: every message reaches the writer
+  }
+  ASSERT_EQ(recorder.Wait(20s), 1) << recorder.Err();
+  const std::string err = recorder.Err();
+  EXPECT_NE(err.find("[error] [/recorder] recording failed: " + file + ": offset "),
+            std::string::npos)
+      << err;
+  EXPECT_NE(err.find(": write failed: File too large\n"), std::string::npos) << err;
+  EXPECT_EQ(err.find("[error]"), err.rfind("[error]")) << "one error line:\n" << err;
+  EXPECT_NE(recorder.Out().find("\nsummary: topics=1 "), std::string::npos) << recorder.Out();
+  EXPECT_LE(std::filesystem::file_size(file), 64u * 1024u);
+  log::McapReader reader(file);
+  EXPECT_TRUE(reader.truncated());
+  log::MessageCursor cursor = reader.Messages();
+  log::MessageView m;
+  uint64_t n = 0, last = 0;
+  while (cursor.Next(m)) {
+    EXPECT_GT(m.sequence, last);  // in order (a loaded machine may drop on the bus, not here)
+    last = m.sequence;
+    ++n;
+  }
+  EXPECT_GE(n, 10u) << "the complete chunks before the limit";
+  EXPECT_LT(n, 100u);
 }
 
 // Runs the recorder with `args`; expects exit 2 and exactly `error` on stderr.
